@@ -1,0 +1,245 @@
+"""Configuration: every bus and device setting as data, validated into typed objects.
+
+The ROS node declares its parameters from these tables (types, defaults, ranges, text) and
+the tools use the same validation, so a bad value gets the same one-line message anywhere.
+"""
+
+from dataclasses import dataclass, field
+import math
+import re
+from typing import Any, Dict, List, Optional, Tuple
+
+from drive_bridge.bus.master import BusTiming, DeviceSpec
+from drive_bridge.devices.registry import FAMILIES, PLANNED_FAMILIES
+from drive_bridge.errors import ConfigError
+from drive_bridge.protocol import rtu
+from drive_bridge.transport.modbus import LinkSettings
+
+PROTOCOLS = ('modbus_rtu', 'ap_ascii', 'modbus_tcp', 'rtu_over_tcp')
+IMPLEMENTED_PROTOCOLS = ('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp')
+BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
+PARITIES = ('N', 'E', 'O')
+DEVICE_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One parameter: name, Python type, default (None = required), limits and meaning.
+
+    ``low``/``high`` bound numbers (``high_open``: high itself excluded); ``choices`` bound
+    strings and ints; ``runtime`` settings may be changed with ``ros2 param set``.
+    """
+
+    name: str
+    kind: type
+    default: Any
+    description: str
+    low: Optional[float] = None
+    high: Optional[float] = None
+    choices: Tuple = ()
+    runtime: bool = False
+    high_open: bool = False
+    drives_only: bool = False
+
+    def allowed(self) -> str:
+        """Return the allowed values in words."""
+        if self.choices:
+            return ', '.join(str(choice) for choice in self.choices)
+        if self.low is not None:
+            closing = ')' if self.high_open else ']'
+            return f'[{self.low:g}, {self.high:g}{closing}'
+        return {bool: 'true or false', str: 'a string', int: 'an integer',
+                float: 'a number', list: 'a list of names'}[self.kind]
+
+
+BUS_SETTINGS: Tuple[Setting, ...] = (
+    Setting('protocol', str, 'modbus_rtu', 'bus protocol', choices=PROTOCOLS),
+    Setting('port', str, '/dev/ttyUSB0', 'serial device (serial protocols)'),
+    Setting('host', str, '127.0.0.1', 'gateway host (TCP protocols)'),
+    Setting('tcp_port', int, 502, 'gateway TCP port', low=1, high=65535),
+    Setting('baudrate', int, 9600, 'serial baud rate', choices=BAUDRATES),
+    Setting('parity', str, 'E', 'serial parity (quote "N" in YAML)', choices=PARITIES),
+    Setting('stopbits', int, 0, '0 = Modbus standard: 2 with no parity, 1 with parity',
+            choices=(0, 1, 2)),
+    Setting('timeout', float, 0.5, 'seconds per transaction', low=0.02, high=10.0),
+    Setting('retries', int, 2, 'retries of a read (commands are never repeated)',
+            low=0, high=10),
+    Setting('devices', list, None, 'device names; each has a block <name>.*'),
+    Setting('offline_after', int, 3,
+            'failed transactions in a row before a device is reported offline', low=1, high=100),
+    Setting('backoff_max', float, 10.0,
+            'longest pause in seconds between probes of an offline device or link',
+            low=0.5, high=600.0),
+    Setting('frame_gap', float, 0.0,
+            'pause in seconds between transactions; 0 = 3.5 characters on serial lines',
+            low=0.0, high=1.0),
+    Setting('local_echo', bool, False, 'the RS-485 adapter echoes what it sends'),
+    Setting('diagnostics_period', float, 1.0, 'seconds between /diagnostics messages',
+            low=0.1, high=60.0),
+)
+
+DEVICE_SETTINGS: Tuple[Setting, ...] = (
+    Setting('family', str, None, 'device family', choices=tuple(FAMILIES)),
+    Setting('model', str, 'auto', 'device model; auto reads it from the device'),
+    Setting('address', int, None, 'bus address', low=1, high=247),
+    Setting('poll_rate', float, 5.0, 'polls per second', low=0.1, high=100.0, runtime=True),
+    Setting('allow_control', bool, True, 'false: monitor only, commands refused',
+            runtime=True),
+    Setting('stop_on_shutdown', bool, True,
+            'a clean shutdown stops the motors this node started', runtime=True),
+    Setting('current_scale', float, 1.0,
+            'factor on the reported current (MCD5-0068B and smaller: 0.1)',
+            low=0.001, high=1000.0),
+    Setting('speed_reference', float, 0.0, 'drives: percent, FC scaling',
+            low=-200.0, high=200.0, high_open=True, runtime=True, drives_only=True),
+    Setting('reference_timeout', float, 0.0,
+            'drives: seconds without a speed_reference message before a ramp stop; 0 = off',
+            low=0.0, high=3600.0, runtime=True, drives_only=True),
+)
+BUS_SETTING = {setting.name: setting for setting in BUS_SETTINGS}
+DEVICE_SETTING = {setting.name: setting for setting in DEVICE_SETTINGS}
+
+
+@dataclass
+class DeviceConfig:
+    """One validated device block."""
+
+    name: str
+    family: str
+    model: str
+    address: int
+    poll_rate: float
+    allow_control: bool
+    stop_on_shutdown: bool
+    current_scale: float
+
+    def make_spec(self) -> DeviceSpec:
+        """Return the bus's view of this device, with its profile."""
+        family = FAMILIES[self.family]
+        profile = family.make_profile(self.model, self.current_scale)
+        return DeviceSpec(self.name, self.address, profile, self.poll_rate,
+                          self.allow_control, self.stop_on_shutdown)
+
+
+@dataclass
+class BridgeConfig:
+    """A validated bus with its devices."""
+
+    link: LinkSettings
+    timing: BusTiming
+    devices: List[DeviceConfig] = field(default_factory=list)
+    diagnostics_period_s: float = 1.0
+
+
+def check_value(setting: Setting, value: Any, label: str) -> Any:
+    """Return ``value`` checked against ``setting`` (ints accepted for floats), or raise."""
+    if value is None:
+        raise ConfigError(f'parameter {label!r} is required: allowed {setting.allowed()}')
+    value = _coerce(setting, value, label)
+    if setting.choices and value not in setting.choices:
+        raise ConfigError(f'parameter {label!r} = {value!r} is invalid: allowed '
+                          f'{setting.allowed()}')
+    if setting.low is not None and not _in_range(setting, value):
+        raise ConfigError(f'parameter {label!r} = {value!r} is out of range: allowed '
+                          f'{setting.allowed()}')
+    return value
+
+
+def _coerce(setting: Setting, value: Any, label: str) -> Any:
+    if setting.kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if setting.kind is list:
+        ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
+    else:
+        ok = isinstance(value, setting.kind) and not (
+            setting.kind is not bool and isinstance(value, bool))
+    if not ok:
+        hint = ''
+        if setting.name == 'parity' and isinstance(value, bool):
+            hint = ' (write parity: "N" with quotes: unquoted N is YAML false)'
+        raise ConfigError(f'parameter {label!r} = {value!r} has the wrong type: allowed '
+                          f'{setting.allowed()}{hint}')
+    if setting.kind is float and (math.isnan(value) or math.isinf(value)):
+        raise ConfigError(f'parameter {label!r} = {value!r} must be a finite number')
+    return list(value) if setting.kind is list else value
+
+
+def _in_range(setting: Setting, value: float) -> bool:
+    if setting.high_open:
+        return setting.low <= value < setting.high
+    return setting.low <= value <= setting.high
+
+
+def build_config(bus_values: Dict[str, Any], device_values: Dict[str, Dict[str, Any]]) \
+        -> BridgeConfig:
+    """Validate raw values (name -> value; devices: name -> {setting -> value})."""
+    bus = {setting.name: check_value(setting, bus_values.get(setting.name, setting.default),
+                                     setting.name)
+           for setting in BUS_SETTINGS}
+    if bus['protocol'] not in IMPLEMENTED_PROTOCOLS:
+        raise ConfigError(f"parameter 'protocol' = {bus['protocol']!r} is not implemented in "
+                          f'this version: allowed {", ".join(IMPLEMENTED_PROTOCOLS)}')
+    names = bus['devices']
+    if not names:
+        raise ConfigError("parameter 'devices' is empty: list at least one device name")
+    devices = [build_device(name, device_values.get(name, {}), bus['protocol'])
+               for name in _checked_names(names)]
+    _check_unique_addresses(devices)
+    link = LinkSettings(
+        protocol=bus['protocol'], port=bus['port'], host=bus['host'],
+        tcp_port=bus['tcp_port'], baudrate=bus['baudrate'], parity=bus['parity'],
+        stopbits=bus['stopbits'], timeout_s=bus['timeout'], local_echo=bus['local_echo'])
+    gap = bus['frame_gap']
+    if gap == 0.0 and link.is_serial:
+        gap = rtu.frame_gap_s(link.baudrate, link.parity, link.effective_stopbits)
+    timing = BusTiming(retries=bus['retries'], offline_after=bus['offline_after'],
+                       backoff_initial_s=min(1.0, bus['backoff_max']),
+                       backoff_max_s=bus['backoff_max'], frame_gap_s=gap)
+    return BridgeConfig(link, timing, devices, bus['diagnostics_period'])
+
+
+def _checked_names(names: List[str]) -> List[str]:
+    seen = set()
+    for name in names:
+        if not DEVICE_NAME.match(name):
+            raise ConfigError(f"parameter 'devices': name {name!r} is invalid: use a letter "
+                              'followed by letters, digits or _ (it becomes a topic name)')
+        if name in seen:
+            raise ConfigError(f"parameter 'devices': name {name!r} is listed twice")
+        seen.add(name)
+    return names
+
+
+def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConfig:
+    """Validate one device block."""
+    family_name = values.get('family')
+    if family_name in PLANNED_FAMILIES:
+        raise ConfigError(f'parameter {name + ".family"!r} = {family_name!r} is not '
+                          f'implemented in this version: allowed {", ".join(FAMILIES)}')
+    checked = {}
+    for setting in DEVICE_SETTINGS:
+        if setting.drives_only:
+            continue
+        checked[setting.name] = check_value(
+            setting, values.get(setting.name, setting.default), f'{name}.{setting.name}')
+    family = FAMILIES[checked['family']]
+    if checked['model'] not in family.models:
+        raise ConfigError(f'parameter {name + ".model"!r} = {checked["model"]!r} is invalid '
+                          f'for family {family.name}: allowed {", ".join(family.models)}')
+    low, high = family.address_range
+    if not low <= checked['address'] <= high:
+        raise ConfigError(f'parameter {name + ".address"!r} = {checked["address"]} is out of '
+                          f'range for family {family.name}: allowed {low}-{high}')
+    if protocol not in family.protocols:
+        raise ConfigError(f'device {name!r} (family {family.name}) cannot run on protocol '
+                          f'{protocol!r}: allowed {", ".join(family.protocols)}')
+    return DeviceConfig(name=name, **checked)
+
+
+def _check_unique_addresses(devices: List[DeviceConfig]) -> None:
+    by_address: Dict[int, str] = {}
+    for device in devices:
+        other = by_address.setdefault(device.address, device.name)
+        if other != device.name:
+            raise ConfigError(f'parameter {device.name + ".address"!r} = {device.address} '
+                              f'is also the address of {other!r}: addresses must be unique')

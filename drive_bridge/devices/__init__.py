@@ -1,0 +1,1 @@
+"""Device families: register maps as data, decode/encode, trip tables. No I/O."""

@@ -1,0 +1,302 @@
+"""MCD soft starters: MCD 201/202/500 via the MCD Modbus Module, MCD 3000 via the Remote Operator.
+
+Every table here comes from the manual ``000_b701c31669ff8873.txt`` ("Installation
+Instructions: MCD Modbus Module", order code 175G9000); each names its section.
+Register numbers are the manual's 1-based numbers; the frame address is number - 1.
+"""
+
+from dataclasses import dataclass
+from typing import Dict, FrozenSet, List, Optional, Tuple
+
+from drive_bridge.devices.base import CommandPlan, DeviceReading, ReadRegisters, WriteRegister
+from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
+from drive_bridge.protocol.words import bit, bits
+
+FAMILY = 'mcd'
+MODELS = ('auto', 'mcd201', 'mcd202', 'mcd500', 'mcd3000')
+ADDRESS_RANGE = (1, 99)  # Module DIP switches: 0-31 (0 is Modbus broadcast); Remote Operator: 1-99.
+
+
+@dataclass(frozen=True)
+class Register:
+    """One entry of the register map (section 6, "Modbus Register")."""
+
+    number: int
+    name: str
+    access: str  # 'write', 'read', 'read_write'
+    section: str = '6. Modbus Register'
+
+    @property
+    def address(self) -> int:
+        """Return the address in the frame (the manual's number - 1)."""
+        return self.number - 40001
+
+
+REGISTERS: Tuple[Register, ...] = (
+    Register(40002, 'command', 'write'),
+    Register(40003, 'starter_status', 'read'),
+    Register(40004, 'trip_code', 'read'),
+    Register(40005, 'motor_current', 'read'),
+    Register(40006, 'motor_temperature', 'read'),
+    Register(40007, 'product_type_and_version', 'read'),
+    Register(40008, 'serial_protocol_version', 'read'),
+    Register(40009, 'first_parameter', 'read_write'),
+)
+REGISTER = {register.name: register for register in REGISTERS}
+FIRST_PARAMETER_NUMBER = 40009
+LAST_STATUS_NUMBER = 40008  # a read across 40008/40009 gives error 05 (section 8)
+MAX_READ_REGISTERS = 125  # section 8: "up to a maximum of 125 register blocks"
+
+# Section 6, register 40002: command values.
+COMMAND_VALUES: Dict[str, int] = {
+    'start': 1,
+    'stop': 2,
+    'reset': 3,
+    'quick_stop': 4,  # coast to stop
+    'forced_comms_trip': 5,
+}
+
+# Section 6, register 40003 bits 0-3: starter state -> the ROS contract's state names.
+STATE_CODES: Dict[int, str] = {
+    1: 'ready',
+    2: 'starting',
+    3: 'running',
+    4: 'stopping',  # including braking
+    5: 'restart_delay',  # including temperature check
+    6: 'tripped',
+    7: 'program_mode',
+    8: 'jog_forward',
+    9: 'jog_reverse',
+}
+
+# Section 6, register 40003 bits 4-6.
+STATUS_BIT_PHASE_SEQUENCE = 4  # 1 = positive phase sequence (only valid if bit 6 = 1)
+STATUS_BIT_CURRENT_ABOVE_FLC = 5
+STATUS_BIT_INITIALISED = 6
+
+# Section 6, register 40007 bits 3-7: product type.
+PRODUCT_TYPES: Dict[int, str] = {1: 'MCD 3000', 4: 'MCD 200', 7: 'MCD 500'}
+
+# Section 7, "Trip Codes": code -> (name, models that list it). 255 = no trip.
+NO_TRIP = 255
+_ALL = frozenset({'mcd201', 'mcd202', 'mcd500', 'mcd3000'})
+_NOT_201 = frozenset({'mcd202', 'mcd500', 'mcd3000'})
+_500_3000 = frozenset({'mcd500', 'mcd3000'})
+_500 = frozenset({'mcd500'})
+TRIP_CODES: Dict[int, Tuple[str, FrozenSet[str]]] = {
+    1: ('Excess start time', _NOT_201),
+    2: ('Motor overload (thermal model)', _NOT_201),
+    3: ('Motor thermistor', _NOT_201),
+    4: ('Current imbalance', _NOT_201),
+    5: ('Frequency (mains supply)', _ALL),
+    6: ('Phase sequence', _NOT_201),
+    7: ('Instantaneous overcurrent', _500_3000),
+    8: ('Power loss (power circuit)', _ALL),
+    9: ('Undercurrent', _500_3000),
+    10: ('Heatsink overtemperature', _500_3000),
+    11: ('Motor connection', _500_3000),
+    12: ('Input A trip (auxiliary input A)', _500),
+    13: ('FLC too high (FLC out of range)', _500_3000),
+    14: ('Unsupported option (not available in 6-wire)', _500),
+    15: ('Starter communication', _ALL),
+    16: ('Network communication', _ALL),
+    17: ('Internal fault', _500),
+    23: ('EEPROM fail', _500),
+    26: ('L1 phase loss', _500),
+    27: ('L2 phase loss', _500),
+    28: ('L3 phase loss', _500),
+    29: ('L1-T1 shorted', _500),
+    30: ('L2-T2 shorted', _500),
+    31: ('L3-T3 shorted', _500),
+    33: ('Time-overcurrent (bypass overload)', frozenset({'mcd202', 'mcd500'})),
+    35: ('Battery/clock', _500),
+    36: ('Thermistor circuit', _500),
+}
+
+# Section 9, "Modbus Error Codes" (the module's own codes, partly unlike the Modbus spec):
+# code -> (manual's description, what a technician should check).
+MODULE_ERRORS: Dict[int, Tuple[str, str]] = {
+    1: ('illegal function code',
+        'the module supports only functions 03 (read) and 06 (write single register)'),
+    2: ('illegal data address',
+        'register number invalid for this starter (MCD 200 reads only 40003-40008)'),
+    3: ('not readable data', 'the register cannot be read (40002 is write-only)'),
+    4: ('not writable data', 'the register cannot be written (40003-40008 are read-only)'),
+    5: ('data boundary fault',
+        'read across the 40008/40009 boundary or more than 125 registers'),
+    6: ('invalid command code', 'command register 40002 takes only 1-5'),
+    7: ('illegal parameter read', 'invalid parameter number for this starter'),
+    8: ('illegal parameter write', 'invalid parameter number, read-only or hidden parameter'),
+    9: ('unsupported command',
+        'network control disabled (Hand On mode or par. 3-2); '
+        'set the starter to Auto On and par. 3-2 Comms in Remote to enable'),
+    10: ('local communication error',
+         'no communication between the Modbus Module and the starter: check the module '
+         'is seated and the starter has control power'),
+}
+
+
+@dataclass(frozen=True)
+class ModelFeatures:
+    """What one model reports (sections 6 and 7: the per-model columns)."""
+
+    name: str
+    product_type: int
+    states: FrozenSet[int]
+    status_bits: FrozenSet[int]
+    has_current: bool
+    has_temperature: bool
+    max_parameter: int  # 0: no parameter registers; MCD 500 up to 40599, MCD 3000 par. 60
+
+
+_BASIC_STATES = frozenset({1, 2, 3, 4, 6})
+MODEL_FEATURES: Dict[str, ModelFeatures] = {
+    'mcd201': ModelFeatures('mcd201', 4, _BASIC_STATES, frozenset(), False, False, 0),
+    'mcd202': ModelFeatures(
+        'mcd202', 4, _BASIC_STATES,
+        frozenset({STATUS_BIT_CURRENT_ABOVE_FLC, STATUS_BIT_INITIALISED}), True, True, 0),
+    'mcd500': ModelFeatures(
+        'mcd500', 7, frozenset(range(1, 10)),
+        frozenset({STATUS_BIT_CURRENT_ABOVE_FLC, STATUS_BIT_INITIALISED}), True, True, 591),
+    'mcd3000': ModelFeatures(
+        'mcd3000', 1, frozenset({1, 2, 3, 4, 5, 6, 7}),
+        frozenset({STATUS_BIT_INITIALISED}), True, True, 60),
+}
+# The product type cannot tell an MCD 201 from a 202: `auto` uses the 202's feature set.
+AUTO_MODEL_BY_PRODUCT_TYPE = {1: 'mcd3000', 4: 'mcd202', 7: 'mcd500'}
+
+
+def trip_name(code: int, model: str = '') -> str:
+    """Return the manual's name of trip ``code`` ('' for no trip)."""
+    if code in (0, NO_TRIP):
+        return ''
+    entry = TRIP_CODES.get(code)
+    if entry is None:
+        return f'unknown trip code {code}'
+    name, models = entry
+    if model and model not in models:
+        return f'{name} (not listed for {model})'
+    return name
+
+
+def module_error_text(code: int) -> str:
+    """Return technician text for one of the module's error codes 01-10."""
+    entry = MODULE_ERRORS.get(code)
+    if entry is None:
+        return f'Modbus error {code:02d} (not in the module manual)'
+    description, advice = entry
+    return f'{advice} ({description}), Modbus error {code:02d}'
+
+
+def decode_product_word(word: int) -> Tuple[int, int]:
+    """Split register 40007 into (product type, parameter list version)."""
+    return bits(word, 3, 7), bits(word, 0, 2)
+
+
+def resolve_model(configured: str, product_word: int) -> str:
+    """Return the model to use for a device reporting ``product_word`` in 40007.
+
+    Raises ModelMismatch when the configured model is not the product the device reports.
+    """
+    product_type, _ = decode_product_word(product_word)
+    reported = PRODUCT_TYPES.get(product_type, f'unknown product type {product_type}')
+    if configured == 'auto':
+        model = AUTO_MODEL_BY_PRODUCT_TYPE.get(product_type)
+        if model is None:
+            raise ModelMismatch(
+                f'device reports {reported} in register 40007 (value {product_word}); '
+                'set model explicitly if this is an MCD starter')
+        return model
+    expected = MODEL_FEATURES[configured].product_type
+    if product_type != expected:
+        raise ModelMismatch(
+            f'model mismatch: configured {configured} but the device reports {reported} '
+            f'(register 40007 = {product_word}); fix the model parameter or the address')
+    return configured
+
+
+class McdProfile:
+    """Register map, decode and commands of one MCD starter on Modbus RTU."""
+
+    family = FAMILY
+
+    def __init__(self, model: str = 'auto', current_scale: float = 1.0):
+        if model not in MODELS:
+            raise ConfigError(f'unknown MCD model {model!r}: allowed {", ".join(MODELS)}')
+        self.configured_model = model
+        self.model: Optional[str] = None if model == 'auto' else model
+        self.current_scale = current_scale
+
+    @property
+    def features(self) -> ModelFeatures:
+        """Return the features of the resolved (or configured) model."""
+        return MODEL_FEATURES[self.model or 'mcd202']
+
+    def poll_plan(self) -> List[ReadRegisters]:
+        """Return the reads of one poll: 40003-40008 in one transaction, never past 40008."""
+        first = REGISTER['starter_status']
+        count = LAST_STATUS_NUMBER - first.number + 1
+        return [ReadRegisters(first.address, count)]
+
+    def decode(self, blocks: List[List[int]]) -> DeviceReading:
+        """Decode the registers of one poll (40003-40008) into a reading."""
+        registers = blocks[0]
+        if len(registers) != 6:
+            raise ProtocolError(f'expected 6 registers 40003-40008, got {len(registers)}')
+        status_word, trip_raw, current_raw, temperature_raw, product_word, protocol = registers
+        self.model = resolve_model(self.configured_model, product_word)
+        features = self.features
+        state_code = bits(status_word, 0, 3)
+        state = STATE_CODES.get(state_code, 'unknown')
+        trip_code = 0 if trip_raw == NO_TRIP else trip_raw
+        product_type, list_version = decode_product_word(product_word)
+        reading = DeviceReading(
+            state=state, status_word=status_word, trip_code=trip_code,
+            trip_name=trip_name(trip_code, features.name))
+        if features.has_current:
+            reading.motor_current_a = float(current_raw) * self.current_scale
+        if features.has_temperature:
+            reading.motor_temperature_pct = float(temperature_raw)
+        reading.details = {
+            'model': features.name,
+            'state_code': str(state_code),
+            'initialised': str(bit(status_word, STATUS_BIT_INITIALISED)),
+            'current_above_flc': str(bit(status_word, STATUS_BIT_CURRENT_ABOVE_FLC)),
+            'positive_phase_sequence': str(bit(status_word, STATUS_BIT_PHASE_SEQUENCE)),
+            'trip_code_register': str(trip_raw),
+            'product_type': PRODUCT_TYPES.get(product_type, str(product_type)),
+            'parameter_list_version': str(list_version),
+            'serial_protocol_version': str(protocol),
+        }
+        if state == 'unknown':
+            reading.warnings.append(f'unknown state code {state_code} in 40003')
+        if bit(status_word, STATUS_BIT_CURRENT_ABOVE_FLC) and \
+                STATUS_BIT_CURRENT_ABOVE_FLC in features.status_bits:
+            reading.warnings.append('motor current exceeds FLC')
+        if state == 'tripped':
+            reading.fault = f'tripped: {reading.trip_name or "no trip code"}'
+        return reading
+
+    def command_plan(self, command: str) -> CommandPlan:
+        """Return the write that carries out ``command`` (register 40002)."""
+        value = COMMAND_VALUES.get(command)
+        if value is None:
+            allowed = ', '.join(name for name in COMMAND_VALUES if name != 'forced_comms_trip')
+            raise CommandRefused(f'MCD starters have no {command} command (allowed: {allowed})')
+        return CommandPlan(command, (WriteRegister(REGISTER['command'].address, value),))
+
+    def parameter_address(self, number: int) -> int:
+        """Return the frame address of parameter ``number`` (1 = register 40009)."""
+        maximum = self.features.max_parameter
+        if maximum == 0:
+            raise CommandRefused(
+                f'{self.features.name} has no parameter registers over Modbus '
+                '(MCD 200: only 40003-40008)')
+        if not 1 <= number <= maximum:
+            raise CommandRefused(
+                f'parameter {number} is out of range for {self.features.name}: 1-{maximum}')
+        return FIRST_PARAMETER_NUMBER + number - 1 - 40001
+
+    def explain_exception(self, code: int) -> str:
+        """Return technician text for a Modbus exception code from the module."""
+        return module_error_text(code)

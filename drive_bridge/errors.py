@@ -1,0 +1,56 @@
+"""Typed exceptions shared by every layer; the ROS edge turns them into messages."""
+
+
+class DriveBridgeError(Exception):
+    """Base class of every error raised by drive_bridge."""
+
+
+class ConfigError(DriveBridgeError):
+    """A configuration value is missing, of the wrong type or out of range."""
+
+
+class ProtocolError(DriveBridgeError):
+    """Bytes or values that do not follow the protocol."""
+
+
+class TransportError(DriveBridgeError):
+    """A transaction failed on the wire; ``kind`` names the failure for statistics."""
+
+    kind = 'transport'
+
+
+class LinkDown(TransportError):
+    """The serial port or TCP connection is not open (missing, refused, unplugged)."""
+
+    kind = 'link'
+
+
+class NoResponse(TransportError):
+    """The device did not answer within the timeout (silence)."""
+
+    kind = 'timeout'
+
+
+class BadFrame(TransportError):
+    """Bytes came back but did not form a valid reply (CRC, garbage, wrong address)."""
+
+    kind = 'bad_frame'
+
+
+class DeviceException(TransportError):
+    """The device answered with a Modbus exception code; it did not execute the request."""
+
+    kind = 'exception'
+
+    def __init__(self, code: int, text: str = ''):
+        self.code = code
+        self.text = text or f'exception code {code:02d}'
+        super().__init__(self.text)
+
+
+class CommandRefused(DriveBridgeError):
+    """The bridge refused a command before sending anything."""
+
+
+class ModelMismatch(DriveBridgeError):
+    """The device reports another model than the configuration names."""

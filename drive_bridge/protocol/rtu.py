@@ -1,0 +1,158 @@
+"""Modbus RTU framing, pure: request/response PDUs, ADUs with CRC, and a request decoder.
+
+The decoder follows the contract of pymodbus's framers: it is given the bytes received so
+far and answers with a complete frame and how many bytes it used, with "need more bytes",
+or with how many bytes to discard (a frame whose CRC is wrong). It never raises on input.
+Function codes and exception codes: Modbus Application Protocol V1.1b3, section 6 and 7.
+"""
+
+from dataclasses import dataclass
+import struct
+from typing import Optional
+
+from drive_bridge.protocol.crc import append_crc, crc_ok
+
+READ_COILS = 0x01
+READ_HOLDING_REGISTERS = 0x03
+READ_INPUT_REGISTERS = 0x04
+WRITE_SINGLE_COIL = 0x05
+WRITE_SINGLE_REGISTER = 0x06
+DIAGNOSTICS = 0x08
+GET_COMM_EVENT_COUNTER = 0x0B
+WRITE_MULTIPLE_COILS = 0x0F
+WRITE_MULTIPLE_REGISTERS = 0x10
+REPORT_SERVER_ID = 0x11
+
+# Requests whose length is fixed: unit + function + 4 data bytes + CRC.
+_FIXED_LENGTH_FUNCTIONS = {
+    READ_COILS, 0x02, READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS,
+    WRITE_SINGLE_COIL, WRITE_SINGLE_REGISTER, DIAGNOSTICS,
+}
+# Requests with only unit + function + CRC.
+_EMPTY_FUNCTIONS = {GET_COMM_EVENT_COUNTER, 0x0C, REPORT_SERVER_ID}
+# Requests with a byte count at offset 6: unit fc addr(2) qty(2) count(1) data crc(2).
+_COUNTED_FUNCTIONS = {WRITE_MULTIPLE_COILS, WRITE_MULTIPLE_REGISTERS}
+
+MAX_ADU_BYTES = 256
+
+
+@dataclass(frozen=True)
+class RtuFrame:
+    """One RTU frame without its CRC: unit address, function code and data bytes."""
+
+    unit: int
+    function: int
+    data: bytes
+
+    def encode(self) -> bytes:
+        """Return the frame's bytes with the CRC appended."""
+        return append_crc(bytes([self.unit, self.function]) + self.data)
+
+
+@dataclass(frozen=True)
+class DecodeResult:
+    """What the decoder made of a buffer.
+
+    ``frame`` is set when a whole valid frame was found; ``consumed`` bytes of the buffer
+    are used up (a frame, or garbage to drop); both unset/zero means "need more bytes".
+    ``error`` names what was dropped.
+    """
+
+    frame: Optional[RtuFrame] = None
+    consumed: int = 0
+    error: str = ''
+
+
+def expected_request_length(buffer: bytes) -> Optional[int]:
+    """Return the length of the request starting at ``buffer[0]``, or None if unknown yet.
+
+    Returns -1 for a function code whose request length cannot be known from its header.
+    """
+    if len(buffer) < 2:
+        return None
+    function = buffer[1]
+    if function in _FIXED_LENGTH_FUNCTIONS:
+        return 8
+    if function in _EMPTY_FUNCTIONS:
+        return 4
+    if function in _COUNTED_FUNCTIONS:
+        if len(buffer) < 7:
+            return None
+        return 9 + buffer[6]
+    return -1
+
+
+def decode_request(buffer: bytes, gap_elapsed: bool = False) -> DecodeResult:
+    """Decode one request from the start of ``buffer``.
+
+    ``gap_elapsed`` tells that the line has been silent for 3.5 characters since the last
+    byte: then a frame of unknown function ends where the buffer ends, and an incomplete
+    frame is garbage.
+    """
+    if not buffer:
+        return DecodeResult()
+    length = expected_request_length(buffer)
+    if length is None or (length > 0 and len(buffer) < length):
+        if gap_elapsed:
+            return DecodeResult(consumed=len(buffer), error='truncated frame')
+        return DecodeResult()
+    if length == -1:
+        if not gap_elapsed:
+            return DecodeResult()
+        length = len(buffer)
+    if length > MAX_ADU_BYTES:
+        return DecodeResult(consumed=len(buffer), error='frame too long')
+    candidate = buffer[:length]
+    if not crc_ok(candidate):
+        consumed = len(buffer) if gap_elapsed else length
+        return DecodeResult(consumed=consumed, error='CRC error')
+    frame = RtuFrame(candidate[0], candidate[1], bytes(candidate[2:-2]))
+    return DecodeResult(frame=frame, consumed=length)
+
+
+def read_registers_request(unit: int, address: int, count: int) -> RtuFrame:
+    """Return a function 03 request for ``count`` registers from frame address ``address``."""
+    return RtuFrame(unit, READ_HOLDING_REGISTERS, struct.pack('>HH', address, count))
+
+
+def write_register_request(unit: int, address: int, value: int) -> RtuFrame:
+    """Return a function 06 request writing ``value`` at frame address ``address``."""
+    return RtuFrame(unit, WRITE_SINGLE_REGISTER, struct.pack('>HH', address, value))
+
+
+def registers_response(unit: int, function: int, values: list) -> RtuFrame:
+    """Return a read-registers response carrying ``values``."""
+    payload = b''.join(struct.pack('>H', value & 0xFFFF) for value in values)
+    return RtuFrame(unit, function, bytes([len(payload)]) + payload)
+
+
+def exception_response(unit: int, function: int, code: int) -> RtuFrame:
+    """Return an exception response: function with bit 7 set, then the exception code."""
+    return RtuFrame(unit, function | 0x80, bytes([code]))
+
+
+def parse_address_count(data: bytes) -> tuple:
+    """Return (address, count-or-value) from the first four data bytes of a request."""
+    return struct.unpack('>HH', data[:4])
+
+
+def character_bits(parity: str, stopbits: int) -> int:
+    """Return bits per character on the wire: start + 8 data + parity + stop bits."""
+    return 1 + 8 + (0 if parity == 'N' else 1) + stopbits
+
+
+def character_time_s(baudrate: int, parity: str = 'E', stopbits: int = 1) -> float:
+    """Return the time one character takes on the wire, in seconds."""
+    return character_bits(parity, stopbits) / float(baudrate)
+
+
+def frame_gap_s(baudrate: int, parity: str = 'E', stopbits: int = 1) -> float:
+    """Return the 3.5-character silence that ends a frame (1.75 ms above 19200 baud)."""
+    if baudrate > 19200:
+        return 0.00175
+    return 3.5 * character_time_s(baudrate, parity, stopbits)
+
+
+def default_stopbits(parity: str) -> int:
+    """Return the Modbus standard's stop bits: 2 with no parity, 1 with parity (11 bits)."""
+    return 2 if parity == 'N' else 1

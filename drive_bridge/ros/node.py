@@ -1,0 +1,294 @@
+"""The ROS 2 node ``drive_bridge``: one bus, several devices, the contract's topics and services.
+
+Bus I/O never runs in a ROS callback: the bus thread reports readings through a queue and
+a guard condition (published by the executor), and service callbacks only queue a command
+and wait for its outcome on a future, in their own callback group.
+"""
+
+import queue
+import sys
+from typing import Any, Dict, List, Optional
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (
+    FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float32, String, UInt16
+from std_srvs.srv import Trigger
+
+from drive_bridge import config as cfg
+from drive_bridge.bus.master import BusEvent, BusMaster, DeviceSnapshot
+from drive_bridge.errors import ConfigError, DriveBridgeError
+from drive_bridge.transport.modbus import ModbusTransport
+
+NODE_NAME = 'drive_bridge'
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+SERVICE_COMMANDS = ('start', 'stop', 'quick_stop', 'reset')
+SHUTDOWN_STOP_TIMEOUT_S = 3.0
+
+
+def _descriptor(setting: cfg.Setting, label: str) -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(
+        name=label, description=f'{setting.description}; allowed {setting.allowed()}',
+        read_only=not setting.runtime, dynamic_typing=True)
+    if setting.low is not None and setting.kind is float:
+        descriptor.floating_point_range = [FloatingPointRange(
+            from_value=float(setting.low), to_value=float(setting.high), step=0.0)]
+    elif setting.low is not None and setting.kind is int:
+        descriptor.integer_range = [IntegerRange(
+            from_value=int(setting.low), to_value=int(setting.high), step=1)]
+    return descriptor
+
+
+class _DevicePublishers:
+    """The publishers of one device and what was last published on latched topics."""
+
+    def __init__(self, node: Node, name: str):
+        self.state = node.create_publisher(String, f'{name}/state', LATCHED)
+        self.trip = node.create_publisher(String, f'{name}/trip', LATCHED)
+        self.status_word = node.create_publisher(UInt16, f'{name}/status_word', 10)
+        self.motor_current = node.create_publisher(Float32, f'{name}/motor_current', 10)
+        self.trip_code = node.create_publisher(UInt16, f'{name}/trip_code', 10)
+        self.motor_temperature = node.create_publisher(
+            Float32, f'{name}/motor_temperature', 10)
+        self.last_state: Optional[str] = None
+        self.last_trip: Optional[str] = None
+
+    def publish_state(self, state: str) -> None:
+        if state != self.last_state:
+            self.last_state = state
+            self.state.publish(String(data=state))
+
+    def publish_trip(self, trip: str) -> None:
+        if trip != self.last_trip:
+            self.last_trip = trip
+            self.trip.publish(String(data=trip))
+
+
+class DriveBridgeNode(Node):
+    """One bus owner; see the module docstring and docs in README.md."""
+
+    def __init__(self, **kwargs: Any):
+        super().__init__(NODE_NAME, **kwargs)
+        self.config = self._load_config()
+        self._events: 'queue.SimpleQueue[BusEvent]' = queue.SimpleQueue()
+        self._device_publishers: Dict[str, _DevicePublishers] = {}
+        self._service_group = ReentrantCallbackGroup()
+        self._timer_group = MutuallyExclusiveCallbackGroup()
+        specs = [device.make_spec() for device in self.config.devices]
+        self.bus = BusMaster(ModbusTransport(self.config.link), specs, self.config.timing,
+                             listener=self._on_bus_event)
+        self._guard = self.create_guard_condition(self._publish_events)
+        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        for device in self.config.devices:
+            self._create_device_interface(device.name)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.create_timer(self.config.diagnostics_period_s, self._publish_diagnostics,
+                          callback_group=self._timer_group)
+        self.bus.start()
+        self.get_logger().info(
+            f'bus {self.config.link.describe()}: '
+            + ', '.join(f'{d.name} ({d.family} {d.model} @ {d.address})'
+                        for d in self.config.devices))
+
+    # -- configuration ------------------------------------------------------------------
+    def _load_config(self) -> cfg.BridgeConfig:
+        bus_values = {setting.name: self._declare(setting, setting.name)
+                      for setting in cfg.BUS_SETTINGS}
+        names = bus_values.get('devices') or []
+        if not isinstance(names, list):
+            names = []
+        device_values = {}
+        for name in names:
+            if not isinstance(name, str) or not cfg.DEVICE_NAME.match(name):
+                continue
+            device_values[name] = {
+                setting.name: self._declare(setting, f'{name}.{setting.name}')
+                for setting in cfg.DEVICE_SETTINGS if not setting.drives_only}
+        self._check_unknown_overrides(names)
+        return cfg.build_config(bus_values, device_values)
+
+    def _declare(self, setting: cfg.Setting, label: str) -> Any:
+        parameter = self.declare_parameter(label, setting.default, _descriptor(setting, label))
+        value = parameter.value
+        return list(value) if isinstance(value, (list, tuple)) else value
+
+    def _check_unknown_overrides(self, names: List[str]) -> None:
+        overrides = getattr(self, '_parameter_overrides', {}) or {}
+        for key in overrides:
+            if self.has_parameter(key) or key.startswith('qos_overrides.'):
+                continue
+            device, _, setting = key.partition('.')
+            if device in names and setting in cfg.DEVICE_SETTING and \
+                    cfg.DEVICE_SETTING[setting].drives_only:
+                raise ConfigError(f'parameter {key!r} applies to drives only')
+            known = ', '.join(s.name for s in cfg.DEVICE_SETTINGS) if device in names \
+                else ', '.join(s.name for s in cfg.BUS_SETTINGS)
+            raise ConfigError(f'unknown parameter {key!r} in the parameters: known are '
+                              f'{known} (device blocks must be listed in devices)')
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        for parameter in parameters:
+            device, _, setting_name = parameter.name.partition('.')
+            setting = cfg.DEVICE_SETTING.get(setting_name)
+            if device not in self.bus.device_names or setting is None:
+                continue
+            try:
+                value = cfg.check_value(setting, parameter.value, parameter.name)
+            except ConfigError as error:
+                return SetParametersResult(successful=False, reason=str(error))
+            if setting_name == 'allow_control':
+                self.bus.set_allow_control(device, value)
+            elif setting_name == 'poll_rate':
+                self.bus.set_poll_rate(device, value)
+            elif setting_name == 'stop_on_shutdown':
+                self.bus.set_stop_on_shutdown(device, value)
+        return SetParametersResult(successful=True)
+
+    # -- interface ----------------------------------------------------------------------
+    def _create_device_interface(self, name: str) -> None:
+        publishers = _DevicePublishers(self, name)
+        publishers.publish_state('unknown')
+        self._device_publishers[name] = publishers
+        for command in SERVICE_COMMANDS:
+            self.create_service(
+                Trigger, f'{name}/{command}',
+                lambda request, response, c=command, n=name: self._on_trigger(n, c, response),
+                callback_group=self._service_group)
+
+    def _on_trigger(self, name: str, command: str, response: Trigger.Response):
+        future = self.bus.submit_command(name, command)
+        try:
+            message = future.result(timeout=self.config.timing.command_timeout_s
+                                    + self.config.link.timeout_s)
+            response.success, response.message = True, str(message)
+        except DriveBridgeError as error:
+            response.success, response.message = False, str(error)
+        except TimeoutError:
+            response.success = False
+            response.message = f'{command} not confirmed: the bus did not answer in time'
+        level = self.get_logger().info if response.success else self.get_logger().warning
+        level(f'{name}/{command}: {response.message}')
+        return response
+
+    # -- bus events (bus thread -> executor) --------------------------------------------
+    def _on_bus_event(self, event: BusEvent) -> None:
+        self._events.put(event)
+        self._guard.trigger()
+
+    def _publish_events(self) -> None:
+        while True:
+            try:
+                event = self._events.get_nowait()
+            except queue.Empty:
+                return
+            self._publish_event(event)
+
+    def _publish_event(self, event: BusEvent) -> None:
+        publishers = self._device_publishers[event.device]
+        if event.kind == 'offline':
+            publishers.publish_state('offline')
+            self.get_logger().error(f'{event.device} offline: {event.message}')
+        elif event.kind == 'error':
+            publishers.publish_state('unknown')
+            self.get_logger().error(f'{event.device}: {event.message}')
+        elif event.kind == 'online':
+            self.get_logger().info(f'{event.device} online')
+        elif event.kind == 'reading' and event.reading is not None:
+            self._publish_reading(publishers, event.reading)
+
+    @staticmethod
+    def _publish_reading(publishers: _DevicePublishers, reading) -> None:
+        publishers.status_word.publish(UInt16(data=int(reading.status_word)))
+        publishers.trip_code.publish(UInt16(data=int(reading.trip_code)))
+        if reading.motor_current_a is not None:
+            publishers.motor_current.publish(Float32(data=float(reading.motor_current_a)))
+        if reading.motor_temperature_pct is not None:
+            publishers.motor_temperature.publish(
+                Float32(data=float(reading.motor_temperature_pct)))
+        publishers.publish_trip(reading.trip_name)
+        publishers.publish_state(reading.state)
+
+    # -- diagnostics --------------------------------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        array.status = [diagnostic_status(self.bus.snapshot(name), self.config.link.describe())
+                        for name in self.bus.device_names]
+        self._diagnostics.publish(array)
+
+    # -- shutdown -----------------------------------------------------------------------
+    def shutdown_bus(self) -> None:
+        """Stop the motors this node started (per stop_on_shutdown), then close the bus."""
+        for outcome in self.bus.shutdown(stop_motors=True, timeout_s=SHUTDOWN_STOP_TIMEOUT_S):
+            print(f'[drive_bridge] shutdown: {outcome}', file=sys.stderr, flush=True)
+
+
+def diagnostic_status(snapshot: DeviceSnapshot, link: str) -> DiagnosticStatus:
+    """Return the DiagnosticStatus of one device (contract: level, name, values)."""
+    status = DiagnosticStatus(
+        name=f'{NODE_NAME}: {snapshot.name}',
+        hardware_id=f'{snapshot.family} {snapshot.model} address {snapshot.unit}')
+    reading = snapshot.reading
+    values = {'link': link, 'online': str(snapshot.online),
+              'allow_control': str(snapshot.allow_control),
+              'started_by_bridge': str(snapshot.started_by_bridge)}
+    if snapshot.online is not True or reading is None:
+        status.level = DiagnosticStatus.ERROR
+        prefix = 'offline' if snapshot.online is False else 'no reading'
+        status.message = f'{prefix}: {snapshot.status_text}'
+    else:
+        values.update(_reading_values(reading))
+        if reading.fault:
+            status.level, status.message = DiagnosticStatus.ERROR, reading.fault
+        elif reading.warnings:
+            status.level, status.message = DiagnosticStatus.WARN, '; '.join(reading.warnings)
+        else:
+            status.level, status.message = DiagnosticStatus.OK, reading.state
+    values.update(snapshot.stats)
+    status.values = [KeyValue(key=key, value=str(value)) for key, value in values.items()]
+    return status
+
+
+def _reading_values(reading) -> Dict[str, str]:
+    values = {'state': reading.state, 'status_word': f'0x{reading.status_word:04X}',
+              'trip_code': str(reading.trip_code), 'trip': reading.trip_name}
+    if reading.motor_current_a is not None:
+        values['motor_current_a'] = f'{reading.motor_current_a:.1f}'
+    if reading.motor_temperature_pct is not None:
+        values['motor_temperature_pct'] = f'{reading.motor_temperature_pct:.0f}'
+    values.update(reading.details)
+    return values
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    """Run the node until SIGINT/SIGTERM; exit 2 with one line on a configuration error."""
+    rclpy.init(args=args)
+    node: Optional[DriveBridgeNode] = None
+    exit_code = 0
+    try:
+        node = DriveBridgeNode()
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.5)
+    except ConfigError as error:
+        print(f'[drive_bridge] configuration error: {error}', file=sys.stderr, flush=True)
+        exit_code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.shutdown_bus()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return exit_code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

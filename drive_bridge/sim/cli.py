@@ -1,0 +1,172 @@
+"""``drive_bridge_sim``: simulated devices on a pty or a TCP port, for tests and commissioning.
+
+Examples::
+
+    drive_bridge_sim --device mcd500:20 --link /tmp/ttyMCD     # RTU on a pty, 8N2
+    drive_bridge_sim --device mcd500:20 --device mcd202:21 --tcp 5020 --framing rtu
+
+With ``--console`` (default when standard input is a terminal) it reads commands:
+``trip ADDR CODE``, ``hand ADDR on|off``, ``silent ADDR on|off``, ``status``, ``quit``.
+"""
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from typing import Dict, List, Optional
+
+from drive_bridge.devices import mcd
+from drive_bridge.sim.mcd_device import McdSimDevice
+from drive_bridge.sim.mcd_model import McdModel, McdSimConfig
+from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
+
+SIM_MODELS = tuple(mcd.MODEL_FEATURES)
+
+
+def parse_device(text: str) -> tuple:
+    """Parse ``MODEL:ADDRESS`` into (model, address)."""
+    model, _, address = text.partition(':')
+    if model not in SIM_MODELS:
+        raise argparse.ArgumentTypeError(
+            f'unknown model {model!r}: allowed {", ".join(SIM_MODELS)}')
+    try:
+        unit = int(address)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'address in {text!r} must be a number') from None
+    if not 1 <= unit <= 247:
+        raise argparse.ArgumentTypeError(f'address {unit} is out of range 1-247')
+    return model, unit
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser."""
+    parser = argparse.ArgumentParser(prog='drive_bridge_sim', description=__doc__.split('\n')[0])
+    parser.add_argument('--device', action='append', type=parse_device, required=True,
+                        metavar='MODEL:ADDRESS', help=f'models: {", ".join(SIM_MODELS)}')
+    parser.add_argument('--link', default='', help='symlink to create for the pty')
+    parser.add_argument('--no-pty', action='store_true', help='do not open a pty')
+    parser.add_argument('--tcp', type=int, default=None, metavar='PORT',
+                        help='also listen on this TCP port (0 = any free port)')
+    parser.add_argument('--host', default='127.0.0.1', help='TCP address to listen on')
+    parser.add_argument('--framing', choices=('mbap', 'rtu'), default='mbap',
+                        help='TCP framing: mbap = Modbus TCP, rtu = RTU over TCP')
+    parser.add_argument('--wire-baud', type=int, default=0,
+                        help='hold replies back to the wire time at this baud rate')
+    parser.add_argument('--wire-parity', choices=('N', 'E', 'O'), default='E')
+    parser.add_argument('--start-time', type=float, default=3.0, help='soft start, seconds')
+    parser.add_argument('--stop-time', type=float, default=2.0, help='soft stop, seconds')
+    parser.add_argument('--flc', type=float, default=100.0, help='motor FLC, amperes')
+    parser.add_argument('--hand-on', type=int, action='append', default=[], metavar='ADDR',
+                        help='start this device in Hand On mode (network start/stop refused)')
+    parser.add_argument('--trip', action='append', default=[], metavar='ADDR:CODE',
+                        help='start this device tripped with this trip code')
+    parser.add_argument('--console', action='store_true', default=None,
+                        help='read commands from standard input')
+    return parser
+
+
+def build_server(args: argparse.Namespace) -> ModbusSimServer:
+    """Create the devices and the server from parsed arguments."""
+    now = time.monotonic()
+    devices: Dict[int, McdSimDevice] = {}
+    for model, unit in args.device:
+        if unit in devices:
+            raise SystemExit(f'drive_bridge_sim: address {unit} is used twice')
+        config = McdSimConfig(model=model, start_time_s=args.start_time,
+                              stop_time_s=args.stop_time, motor_flc_a=args.flc)
+        devices[unit] = McdSimDevice(McdModel(config, now))
+    for unit in args.hand_on:
+        _device(devices, unit).model.hand_on = True
+    for text in args.trip:
+        unit, _, code = text.partition(':')
+        _device(devices, int(unit)).model.trip(int(code), now)
+    wire = WireTiming(args.wire_baud, args.wire_parity,
+                      1 if args.wire_parity != 'N' else 2) if args.wire_baud else None
+    return ModbusSimServer(devices, wire=wire)
+
+
+def _device(devices: Dict[int, McdSimDevice], unit: int) -> McdSimDevice:
+    if unit not in devices:
+        raise SystemExit(f'drive_bridge_sim: no device at address {unit}')
+    return devices[unit]
+
+
+def run_console_command(server: ModbusSimServer, line: str) -> str:
+    """Carry out one console command; return the answer to print."""
+    words = line.split()
+    if not words:
+        return ''
+    try:
+        return _console(server, words)
+    except (ValueError, IndexError, KeyError) as error:
+        return f'error: {error}; commands: trip ADDR CODE, hand ADDR on|off, ' \
+               'silent ADDR on|off, status, quit'
+
+
+def _console(server: ModbusSimServer, words: List[str]) -> str:
+    command = words[0]
+    now = time.monotonic()
+    with server.lock:
+        if command == 'status':
+            return '\n'.join(_describe(unit, device, now)
+                             for unit, device in sorted(server.devices.items()))
+        unit = int(words[1])
+        device = server.devices[unit]
+        if command == 'trip':
+            device.model.trip(int(words[2]), now)
+        elif command == 'hand':
+            device.model.hand_on = words[2] == 'on'
+        elif command == 'silent':
+            (server.silent_units.add if words[2] == 'on' else server.silent_units.discard)(unit)
+        else:
+            raise ValueError(f'unknown command {command!r}')
+        return _describe(unit, device, now)
+
+
+def _describe(unit: int, device: McdSimDevice, now: float) -> str:
+    model = device.model
+    model.advance(now)
+    state = mcd.STATE_CODES.get(model.state, '?')
+    return (f'{unit}: {model.config.model} {state} current {model.motor_current_a:.1f} A '
+            f'temperature {model.temperature_pct:.0f} % trip {model.trip_code} '
+            f'hand_on {model.hand_on}')
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Run the simulator until SIGINT/SIGTERM or ``quit``."""
+    args = build_parser().parse_args(argv)
+    server = build_server(args)
+    if not args.no_pty:
+        print(f'pty: {server.open_pty(args.link)}', flush=True)
+        if args.link:
+            print(f'link: {args.link}', flush=True)
+    if args.tcp is not None:
+        print(f'tcp: {args.host}:{server.open_tcp(args.host, args.tcp, args.framing)} '
+              f'({args.framing})', flush=True)
+    server.start()
+    print('ready: ' + ', '.join(f'{m}@{u}' for m, u in args.device), flush=True)
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    signal.signal(signal.SIGINT, lambda *_: done.set())
+    console = sys.stdin.isatty() if args.console is None else args.console
+    if console:
+        threading.Thread(target=_read_console, args=(server, done), daemon=True).start()
+    while not done.wait(0.5):
+        pass
+    server.stop()
+    return 0
+
+
+def _read_console(server: ModbusSimServer, done: threading.Event) -> None:
+    for line in sys.stdin:
+        if line.strip() == 'quit':
+            break
+        answer = run_console_command(server, line)
+        if answer:
+            print(answer, flush=True)
+    done.set()
+
+
+if __name__ == '__main__':
+    sys.exit(main())

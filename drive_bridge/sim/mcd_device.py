@@ -1,0 +1,33 @@
+"""The MCD Modbus Module as a simulated slave: functions 03 and 06 onto :class:`McdModel`."""
+
+from typing import Optional
+
+from drive_bridge.protocol import rtu
+from drive_bridge.protocol.rtu import RtuFrame
+from drive_bridge.sim.mcd_model import McdModel, ModuleError
+
+ILLEGAL_FUNCTION = 1  # manual section 9: function other than 03 or 06
+
+
+class McdSimDevice:
+    """Answers Modbus requests like an MCD Modbus Module (or Remote Operator)."""
+
+    def __init__(self, model: McdModel):
+        self.model = model
+
+    def handle(self, frame: RtuFrame, now_s: float) -> Optional[RtuFrame]:
+        """Answer one request; module errors become exception replies with their code."""
+        if frame.unit == 0:
+            return None  # "Modbus broadcast functions are not supported" (section 8)
+        try:
+            if frame.function == rtu.READ_HOLDING_REGISTERS and len(frame.data) == 4:
+                address, count = rtu.parse_address_count(frame.data)
+                values = self.model.read_registers(address, count, now_s)
+                return rtu.registers_response(frame.unit, frame.function, values)
+            if frame.function == rtu.WRITE_SINGLE_REGISTER and len(frame.data) == 4:
+                address, value = rtu.parse_address_count(frame.data)
+                self.model.write_register(address, value, now_s)
+                return RtuFrame(frame.unit, frame.function, frame.data)  # echo = acknowledge
+            raise ModuleError(ILLEGAL_FUNCTION)
+        except ModuleError as error:
+            return rtu.exception_response(frame.unit, frame.function, error.code)

@@ -1,0 +1,226 @@
+"""Modbus RTU (serial), Modbus TCP and RTU over TCP through pymodbus, 3.6.9 to 3.16.
+
+One adapter hides the API differences: the unit keyword (``slave=`` before 3.10,
+``device_id=`` after), the framer enum (``Framer`` / ``FramerType``), whether errors are
+returned or raised, and the write echo's field names. pymodbus's own retries are off: the
+bus owns the retry policy. Failures are raised as the typed errors of
+:mod:`drive_bridge.errors`, classified by kind for the statistics.
+"""
+
+from dataclasses import dataclass
+import inspect
+import logging
+import os
+from typing import List, Optional
+
+import pymodbus
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+
+from drive_bridge.devices.base import ReadRegisters, WriteRegister
+from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.protocol import rtu
+
+try:  # pymodbus >= 3.7
+    from pymodbus import FramerType as _Framer
+except ImportError:  # pymodbus 3.6
+    from pymodbus.framer import Framer as _Framer
+
+PYMODBUS_VERSION = pymodbus.__version__
+# pymodbus logs every timeout at ERROR; the bus counts and reports failures itself.
+logging.getLogger('pymodbus').setLevel(logging.CRITICAL)
+_UNIT_KEYWORD = (
+    'device_id'
+    if 'device_id' in inspect.signature(ModbusSerialClient.read_holding_registers).parameters
+    else 'slave')
+_HAS_TRACE_PACKET = 'trace_packet' in inspect.signature(ModbusSerialClient.__init__).parameters
+_GATEWAY_EXCEPTIONS = {0x0A: 'gateway path unavailable', 0x0B: 'gateway target did not respond'}
+
+RECEIVE_POLL_INTERVAL_S = 0.0005
+SERIAL_PROTOCOLS = ('modbus_rtu',)
+TCP_PROTOCOLS = ('modbus_tcp', 'rtu_over_tcp')
+
+
+@dataclass
+class LinkSettings:
+    """Where the bus is and how its bytes are framed; times in seconds."""
+
+    protocol: str = 'modbus_rtu'
+    port: str = '/dev/ttyUSB0'
+    host: str = '127.0.0.1'
+    tcp_port: int = 502
+    baudrate: int = 9600
+    parity: str = 'E'
+    stopbits: int = 0  # 0 = Modbus standard: 2 with no parity, 1 with parity
+    timeout_s: float = 0.5
+    local_echo: bool = False
+
+    @property
+    def effective_stopbits(self) -> int:
+        """Return the stop bits in use (resolving 0 to the Modbus standard)."""
+        return self.stopbits or rtu.default_stopbits(self.parity)
+
+    @property
+    def is_serial(self) -> bool:
+        """Return whether the bus is a local serial port."""
+        return self.protocol in SERIAL_PROTOCOLS
+
+    def describe(self) -> str:
+        """Return the link in words, for messages."""
+        if self.is_serial:
+            return (f'{self.port} {self.baudrate} {self.parity}'
+                    f'{self.effective_stopbits}')
+        return f'{self.protocol} {self.host}:{self.tcp_port}'
+
+
+class ModbusTransport:
+    """Run single Modbus transactions on one bus; not thread-safe (the bus thread owns it)."""
+
+    def __init__(self, settings: LinkSettings):
+        self.settings = settings
+        self._client = None
+        self._received = bytearray()
+
+    # -- connection ---------------------------------------------------------------------
+    @property
+    def connected(self) -> bool:
+        """Return whether the port or connection is open."""
+        return self._client is not None
+
+    def connect(self) -> None:
+        """Open the port or connection; raise LinkDown with the reason in words."""
+        self.close()
+        settings = self.settings
+        if settings.is_serial and not settings.port.startswith(('socket://', 'rfc2217://')) \
+                and not os.path.exists(settings.port):
+            raise LinkDown(f'bus offline: {settings.port} not found')
+        client = self._make_client()
+        try:
+            ok = client.connect()
+        except (OSError, ModbusException) as error:
+            raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}') from error
+        if not ok:
+            client.close()
+            raise LinkDown(f'bus offline: cannot open {settings.describe()}'
+                           + self._open_hint())
+        if hasattr(client, '_recv_interval'):
+            # pymodbus >= 3.10 polls the port every 4 characters and ends a read when a poll
+            # sees no new byte, which adds up to 8 character times to every reply. Its
+            # framer joins partial reads, so a short poll interval is safe and near exact.
+            client._recv_interval = RECEIVE_POLL_INTERVAL_S
+        self._client = client
+
+    def _open_hint(self) -> str:
+        settings = self.settings
+        if settings.is_serial and not os.access(settings.port, os.R_OK | os.W_OK):
+            return ' (permission denied: add the user to the dialout group)'
+        if settings.is_serial and settings.parity != 'N' and '/pts/' in settings.port:
+            return ' (a pty accepts parity N only)'
+        return ''
+
+    def _make_client(self):
+        settings = self.settings
+        common = {'timeout': settings.timeout_s, 'retries': 0}
+        if _HAS_TRACE_PACKET:
+            common['trace_packet'] = self._trace_packet
+        if not _HAS_TRACE_PACKET:  # pymodbus 3.6: no retry on empty, no strict char timing
+            common.update(retry_on_empty=False, reconnect_delay=0)
+        if settings.is_serial:
+            extra = {} if _HAS_TRACE_PACKET else {'strict': False}
+            return ModbusSerialClient(
+                port=settings.port, framer=_Framer.RTU, baudrate=settings.baudrate,
+                bytesize=8, parity=settings.parity, stopbits=settings.effective_stopbits,
+                handle_local_echo=settings.local_echo, **extra, **common)
+        framer = _Framer.SOCKET if settings.protocol == 'modbus_tcp' else _Framer.RTU
+        return ModbusTcpClient(host=settings.host, port=settings.tcp_port, framer=framer,
+                               **common)
+
+    def close(self) -> None:
+        """Close the port or connection (idempotent)."""
+        client, self._client = self._client, None
+        if client is not None:
+            try:
+                client.close()
+            except (OSError, ModbusException):
+                pass
+
+    def _trace_packet(self, sending: bool, data: bytes) -> bytes:
+        if not sending:  # pymodbus passes everything received so far in this transaction
+            self._received[:] = data
+        return data
+
+    # -- transactions -------------------------------------------------------------------
+    def execute(self, unit: int, transaction) -> Optional[List[int]]:
+        """Run one transaction with device ``unit``; return registers read, or None."""
+        if self._client is None:
+            raise LinkDown('bus offline: not connected')
+        self._received.clear()
+        keyword = {_UNIT_KEYWORD: unit}
+        try:
+            if isinstance(transaction, ReadRegisters):
+                response = self._client.read_holding_registers(
+                    transaction.address, count=transaction.count, **keyword)
+                self._check(response)
+                registers = list(response.registers)
+                if len(registers) != transaction.count:
+                    raise BadFrame(f'expected {transaction.count} registers, '
+                                   f'got {len(registers)}')
+                return registers
+            if isinstance(transaction, WriteRegister):
+                response = self._client.write_register(
+                    transaction.address, transaction.value, **keyword)
+                self._check(response)
+                self._check_echo(response, transaction)
+                return None
+        except ConnectionException as error:
+            self.close()
+            raise LinkDown(f'bus offline: {self.settings.describe()}: {error}') from error
+        except ModbusIOException as error:
+            raise self._classify_io_error(str(error)) from error
+        except (OSError, ValueError) as error:
+            self.close()
+            raise LinkDown(f'bus offline: {self.settings.describe()}: {error}') from error
+        raise TypeError(f'unsupported transaction {transaction!r}')
+
+    def _check(self, response) -> None:
+        if isinstance(response, ModbusIOException):  # pymodbus 3.6 returns these
+            raise self._classify_io_error(str(response))
+        if not response.isError():
+            return
+        code = getattr(response, 'exception_code', None)
+        if code is None:
+            raise self._classify_io_error(str(response))
+        if code in _GATEWAY_EXCEPTIONS:
+            raise NoResponse(f'no reply: {_GATEWAY_EXCEPTIONS[code]} '
+                             f'(Modbus exception {code:02X}h)')
+        raise DeviceException(code)
+
+    @staticmethod
+    def _check_echo(response, request: WriteRegister) -> None:
+        value = getattr(response, 'value', None)
+        if value is None:
+            registers = getattr(response, 'registers', None) or [None]
+            value = registers[0]
+        if response.address != request.address or value != request.value:
+            raise BadFrame(f'write echo {response.address}={value} does not match '
+                           f'{request.address}={request.value}')
+
+    def _classify_io_error(self, text: str):
+        if self.settings.is_serial and not self.settings.port.startswith('socket://') \
+                and not os.path.exists(self.settings.port):
+            self.close()
+            return LinkDown(f'bus offline: {self.settings.port} not found')
+        timeout = f'{self.settings.timeout_s:g} s'
+        if self._received or 'decode' in text.lower():
+            return BadFrame(f'invalid reply (CRC error, garbage or wrong address), '
+                            f'{len(self._received)} bytes received')
+        return NoResponse(f'no reply within {timeout}')
+
+
+def wire_time_s(settings: LinkSettings, request_bytes: int, reply_bytes: int) -> float:
+    """Return the minimum time one RTU transaction occupies the line, gaps included."""
+    char_s = rtu.character_time_s(settings.baudrate, settings.parity,
+                                  settings.effective_stopbits)
+    gap_s = rtu.frame_gap_s(settings.baudrate, settings.parity, settings.effective_stopbits)
+    return (request_bytes + reply_bytes) * char_s + 2 * gap_s
+

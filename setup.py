@@ -1,0 +1,30 @@
+"""Build script of the drive_bridge ament_python package."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'drive_bridge'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
+        (f'share/{PACKAGE}', ['package.xml']),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5'],
+    zip_safe=True,
+    maintainer='drive_bridge developers',
+    maintainer_email='dev@drive-bridge.invalid',
+    description='ROS 2 driver for Danfoss soft starters and frequency drives over RS-485',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'drive_bridge_node = drive_bridge.ros.node:main',
+            'drive_bridge_sim = drive_bridge.sim.cli:main',
+        ],
+    },
+)
