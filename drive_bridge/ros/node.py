@@ -162,8 +162,8 @@ class DriveBridgeNode(Node):
                 callback_group=self._service_group)
 
     def _on_trigger(self, name: str, command: str, response: Trigger.Response):
-        future = self.bus.submit_command(name, command)
         try:
+            future = self.bus.submit_command(name, command)
             message = future.result(timeout=self.config.timing.command_timeout_s
                                     + self.config.link.timeout_s)
             response.success, response.message = True, str(message)
@@ -172,8 +172,13 @@ class DriveBridgeNode(Node):
         except TimeoutError:
             response.success = False
             response.message = f'{command} not confirmed: the bus did not answer in time'
-        level = self.get_logger().info if response.success else self.get_logger().warning
-        level(f'{name}/{command}: {response.message}')
+        except Exception as error:  # noqa: B902 - a bug must not kill the node
+            response.success = False
+            response.message = f'{command} failed: internal error {type(error).__name__}: {error}'
+        if response.success:
+            self.get_logger().info(f'{name}/{command}: {response.message}')
+        else:
+            self.get_logger().warning(f'{name}/{command}: {response.message}')
         return response
 
     # -- bus events (bus thread -> executor) --------------------------------------------
@@ -187,7 +192,11 @@ class DriveBridgeNode(Node):
                 event = self._events.get_nowait()
             except queue.Empty:
                 return
-            self._publish_event(event)
+            try:
+                self._publish_event(event)
+            except Exception as error:  # noqa: B902 - a bug must not kill the node
+                self.get_logger().error(f'cannot publish {event.kind} of {event.device}: '
+                                        f'{type(error).__name__}: {error}')
 
     def _publish_event(self, event: BusEvent) -> None:
         publishers = self._device_publishers[event.device]
@@ -216,11 +225,18 @@ class DriveBridgeNode(Node):
 
     # -- diagnostics --------------------------------------------------------------------
     def _publish_diagnostics(self) -> None:
+        try:
+            self._diagnostics.publish(self._diagnostic_array())
+        except Exception as error:  # noqa: B902 - a bug must not kill the node
+            self.get_logger().error(f'cannot publish diagnostics: {type(error).__name__}: '
+                                    f'{error}')
+
+    def _diagnostic_array(self) -> DiagnosticArray:
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
         array.status = [diagnostic_status(self.bus.snapshot(name), self.config.link.describe())
                         for name in self.bus.device_names]
-        self._diagnostics.publish(array)
+        return array
 
     # -- shutdown -----------------------------------------------------------------------
     def shutdown_bus(self) -> None:

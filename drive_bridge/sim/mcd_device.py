@@ -1,10 +1,12 @@
 """The MCD Modbus Module as a simulated slave: functions 03 and 06 onto :class:`McdModel`."""
 
-from typing import Optional
+import time
+from typing import Dict, Optional
 
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
-from drive_bridge.sim.mcd_model import McdModel, ModuleError
+from drive_bridge.sim.mcd_model import McdModel, McdSimConfig, ModuleError
+from drive_bridge.sim.modbus_server import ModbusSimServer
 
 ILLEGAL_FUNCTION = 1  # manual section 9: function other than 03 or 06
 
@@ -31,3 +33,14 @@ class McdSimDevice:
             raise ModuleError(ILLEGAL_FUNCTION)
         except ModuleError as error:
             return rtu.exception_response(frame.unit, frame.function, error.code)
+
+
+def make_mcd_server(models: Dict[int, str], wire=None, **settings) -> ModbusSimServer:
+    """Return a simulated bus with one MCD per address: ``{20: 'mcd500', 21: 'mcd202'}``.
+
+    ``settings`` go to every device's :class:`McdSimConfig` (e.g. ``start_time_s=0.5``).
+    """
+    now = time.monotonic()
+    devices = {unit: McdSimDevice(McdModel(McdSimConfig(model=model, **settings), now))
+               for unit, model in models.items()}
+    return ModbusSimServer(devices, wire=wire)

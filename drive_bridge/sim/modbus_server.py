@@ -110,6 +110,8 @@ class ModbusSimServer:
         self.stats = LinkStats()
         self.silent_units: set = set()
         self.record_frames = False
+        # Optional fault hook: (unit, reply bytes) -> bytes to send instead, or None for silence.
+        self.reply_hook: Optional[Callable[[int, bytes], Optional[bytes]]] = None
         self.pty_path = ''
         self.tcp_port = 0
         self._link_path = ''
@@ -244,8 +246,14 @@ class ModbusSimServer:
                         self.stats.crc_errors += 1
                 continue
             reply = self._answer(result.frame, raw)
-            if reply is not None:
-                self._send_rtu(connection, raw, reply.encode())
+            if reply is None:
+                continue
+            data = reply.encode()
+            hook = self.reply_hook
+            if hook is not None:
+                data = hook(reply.unit, data)
+            if data:
+                self._send_rtu(connection, raw, data)
 
     def _send_rtu(self, connection: _Connection, request: bytes, reply: bytes) -> None:
         if self.wire is not None:

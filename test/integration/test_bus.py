@@ -1,0 +1,95 @@
+"""The bus master with the real transport against the simulator: three devices, one dead."""
+
+import time
+
+import pytest
+
+from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
+from drive_bridge.devices.mcd import McdProfile
+from drive_bridge.errors import CommandRefused
+from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
+from integration_helpers import wait_until
+
+
+@pytest.fixture
+def bus(sim_bus):
+    events = []
+    specs = [DeviceSpec('main', 20, McdProfile('auto'), poll_rate_hz=20.0),
+             DeviceSpec('aux', 21, McdProfile('mcd202'), poll_rate_hz=20.0),
+             DeviceSpec('dead', 22, McdProfile('mcd500'), poll_rate_hz=20.0)]
+    transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.1))
+    master = BusMaster(transport, specs, BusTiming(backoff_max_s=2.0), listener=events.append)
+    master.events = events
+    master.start()
+    yield master
+    master.shutdown(stop_motors=False)
+
+
+def readings(master, name):
+    return [e.reading for e in list(master.events) if e.device == name and e.kind == 'reading']
+
+
+def test_dead_device_offline_others_polled(bus):
+    assert wait_until(lambda: bus.snapshot('dead').online is False, 3.0)
+    count = len(readings(bus, 'main'))
+    time.sleep(1.0)
+    # 20 Hz asked; the dead device costs one 0.1 s timeout per backoff period at most
+    assert len(readings(bus, 'main')) - count >= 12
+    assert len(readings(bus, 'aux')) > 10
+    assert bus.snapshot('main').model == 'mcd500'  # auto from register 40007
+
+
+def test_start_stop_sequence_with_acknowledgement(bus):
+    assert wait_until(lambda: bus.snapshot('main').online, 3.0)
+    assert bus.submit_command('main', 'start').result(timeout=3) == \
+        'start acknowledged by main (address 20)'
+    assert wait_until(lambda: readings(bus, 'main')[-1].state == 'running', 3.0)
+    assert max(r.motor_current_a for r in readings(bus, 'main')) > 300  # start current
+    bus.submit_command('main', 'stop').result(timeout=3)
+    assert wait_until(lambda: readings(bus, 'main')[-1].state == 'ready', 3.0)
+    states = [r.state for r in readings(bus, 'main')]
+    compact = [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s]
+    assert compact == ['ready', 'starting', 'running', 'stopping', 'ready']
+
+
+def test_trip_then_reset(bus, sim_bus):
+    assert wait_until(lambda: bus.snapshot('aux').online, 3.0)
+    with sim_bus.lock:
+        sim_bus.devices[21].model.trip(6, time.monotonic())
+    assert wait_until(lambda: readings(bus, 'aux')[-1].state == 'tripped', 3.0)
+    assert readings(bus, 'aux')[-1].trip_name == 'Phase sequence'
+    with pytest.raises(CommandRefused, match='reset it first'):
+        bus.submit_command('aux', 'start').result(timeout=3)
+    bus.submit_command('aux', 'reset').result(timeout=3)
+    assert wait_until(lambda: readings(bus, 'aux')[-1].state == 'ready', 3.0)
+
+
+def test_hand_on_refusal_reason(bus, sim_bus):
+    assert wait_until(lambda: bus.snapshot('main').online, 3.0)
+    sim_bus.devices[20].model.hand_on = True
+    with pytest.raises(CommandRefused) as error:
+        bus.submit_command('main', 'start').result(timeout=3)
+    assert 'network control disabled (Hand On mode or par. 3-2)' in str(error.value)
+    assert 'Modbus error 09' in str(error.value)
+    assert list(sim_bus.devices[20].model.commands_received) == []
+
+
+def test_parameters_by_number(bus, sim_bus):
+    assert wait_until(lambda: bus.snapshot('main').online, 3.0)
+    assert bus.read_parameter('main', 1).result(timeout=3) == 100  # par. 1-1 FLC = 100 A
+    bus.write_parameter('main', 4, 400).result(timeout=3)  # par. 1-4 current limit 400 %
+    assert sim_bus.devices[20].model.parameters[4] == 400
+    assert bus.read_parameter('main', 4).result(timeout=3) == 400
+
+
+def test_model_mismatch_refuses_commands(sim_bus):
+    spec = DeviceSpec('wrong', 21, McdProfile('mcd500'), poll_rate_hz=20.0)
+    transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.1))
+    master = BusMaster(transport, [spec]).start()
+    try:
+        assert wait_until(lambda: 'mismatch' in master.snapshot('wrong').status_text, 3.0)
+        with pytest.raises(CommandRefused, match='configured mcd500 but the device reports'):
+            master.submit_command('wrong', 'start').result(timeout=3)
+        assert list(sim_bus.devices[21].model.commands_received) == []
+    finally:
+        master.shutdown(stop_motors=False)

@@ -1,0 +1,169 @@
+"""The node in a subprocess against the simulator, driven through rclpy clients."""
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import pytest
+from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+import rclpy
+
+from drive_bridge.sim.mcd_device import make_mcd_server
+from ros_helpers import node_output, RosClient, start_node, stop_node, write_params
+
+DEVICES = {
+    'main': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 10.0},
+    'watch': {'family': 'mcd', 'model': 'auto', 'address': 21, 'poll_rate': 10.0,
+              'allow_control': False},
+    'dead': {'family': 'mcd', 'model': 'mcd500', 'address': 22, 'poll_rate': 10.0},
+}
+
+
+@pytest.fixture(scope='module')
+def sim():
+    server = make_mcd_server({20: 'mcd500', 21: 'mcd202'}, start_time_s=1.0, stop_time_s=1.0)
+    server.open_pty()
+    server.start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture(scope='module')
+def node(sim, tmp_path_factory):
+    params = write_params(tmp_path_factory.mktemp('params') / 'bus.yaml',
+                          {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2,
+                           'backoff_max': 2.0, 'diagnostics_period': 0.5}, DEVICES)
+    process = start_node(params)
+    client = RosClient(list(DEVICES))
+    assert client.wait_state('main', 'ready', 15.0), stop_node(process)
+    yield client
+    client.close()
+    code, output = stop_node(process)
+    print(output)
+
+
+def test_start_running_then_stop_ready(node, sim):
+    response = node.call('main', 'start')
+    assert response.success, response.message
+    assert response.message == 'start acknowledged by main (address 20)'
+    assert node.wait_state('main', 'running')
+    assert max(node.values('main', 'motor_current')) > 300
+    assert node.call('main', 'stop').success
+    assert node.wait_state('main', 'ready')
+    states = node.values('main', 'state')
+    assert states[-4:] == ['starting', 'running', 'stopping', 'ready']
+    assert node.values('main', 'motor_temperature')[-1] > 0
+
+
+def test_reset_after_injected_trip(node, sim):
+    with sim.lock:
+        sim.devices[20].model.trip(2, sim.clock())
+    assert node.wait_state('main', 'tripped')
+    assert node.spin_until(lambda: node.values('main', 'trip')[-1:] ==
+                           ['Motor overload (thermal model)'])
+    assert node.spin_until(lambda: node.values('main', 'trip_code')[-1:] == [2])
+    refused = node.call('main', 'start')
+    assert not refused.success and 'reset it first' in refused.message
+    assert node.spin_until(lambda: (node.diagnostics('main') or DiagnosticStatus()).level ==
+                           DiagnosticStatus.ERROR)
+    assert node.call('main', 'reset').success
+    assert node.wait_state('main', 'ready')
+    assert node.spin_until(lambda: node.values('main', 'trip_code')[-1] == 0)
+    assert node.values('main', 'trip')[-1] == ''
+
+
+def test_hand_on_refusal_with_reason(node, sim):
+    sim.devices[20].model.hand_on = True
+    try:
+        response = node.call('main', 'start')
+    finally:
+        sim.devices[20].model.hand_on = False
+    assert not response.success
+    assert 'network control disabled (Hand On mode or par. 3-2)' in response.message
+    assert 'Modbus error 09' in response.message
+
+
+def test_offline_device(node):
+    assert node.wait_state('dead', 'offline')
+    response = node.call('dead', 'start')
+    assert not response.success and 'offline' in response.message
+    assert node.spin_until(lambda: node.diagnostics('dead') is not None)
+    status = node.diagnostics('dead')
+    assert status.level == DiagnosticStatus.ERROR and status.message.startswith('offline')
+    assert node.values('dead', 'motor_current') == []  # never a stale number
+
+
+def test_monitor_only_device(node, sim):
+    assert node.wait_state('watch', 'ready')
+    response = node.call('watch', 'start')
+    assert not response.success and 'monitor only' in response.message
+    assert list(sim.devices[21].model.commands_received) == []
+
+
+def test_diagnostics_content(node):
+    assert node.spin_until(lambda: node.diagnostics('main') is not None
+                           and node.diagnostics('main').level == DiagnosticStatus.OK)
+    status = node.diagnostics('main')
+    assert status.hardware_id == 'mcd mcd500 address 20'
+    values = {kv.key: kv.value for kv in status.values}
+    for key in ('state', 'status_word', 'motor_current_a', 'transactions', 'errors_timeout',
+                'rtt_avg_ms', 'last_error', 'product_type', 'serial_protocol_version'):
+        assert key in values
+    assert values['product_type'] == 'MCD 500'
+
+
+def test_allow_control_set_at_runtime(node, sim):
+    client = node.node.create_client(SetParameters, '/drive_bridge/set_parameters')
+    assert client.wait_for_service(timeout_sec=5)
+    parameter = ParameterMsg(name='main.allow_control', value=ParameterValue(
+        type=ParameterType.PARAMETER_BOOL, bool_value=False))
+    future = client.call_async(SetParameters.Request(parameters=[parameter]))
+    rclpy.spin_until_future_complete(node.node, future, timeout_sec=5)
+    assert future.result().results[0].successful
+    before = len(sim.devices[20].model.commands_received)
+    response = node.call('main', 'start')
+    assert not response.success and 'monitor only' in response.message
+    assert len(sim.devices[20].model.commands_received) == before
+    parameter.value.bool_value = True
+    future = client.call_async(SetParameters.Request(parameters=[parameter]))
+    rclpy.spin_until_future_complete(node.node, future, timeout_sec=5)
+    assert future.result().results[0].successful
+    node.node.destroy_client(client)
+
+
+@pytest.mark.parametrize('device, bus, expected', [
+    ({'address': 150}, {}, "'main.address' = 150 is out of range for family mcd: allowed 1-99"),
+    ({'family': 'nope'}, {}, "'main.family' = 'nope' is invalid: allowed mcd"),
+    ({}, {'parity': False}, 'write parity: "N" with quotes'),
+    ({'poll_rat': 3.0}, {}, "unknown parameter 'main.poll_rat'"),
+])
+def test_config_errors_stop_the_node_with_one_line(tmp_path, device, bus, expected):
+    params = write_params(tmp_path / 'bad.yaml', {'port': '/dev/null', **bus},
+                          {'main': {'family': 'mcd', 'address': 20, **device}})
+    process = start_node(params)
+    code = process.wait(timeout=20)
+    stderr = node_output(process)
+    assert code == 2
+    lines = [line for line in stderr.splitlines() if 'configuration error' in line]
+    assert len(lines) == 1 and expected in lines[0], stderr
+
+
+def test_sigterm_stops_the_motor_this_node_started(tmp_path):
+    server = make_mcd_server({20: 'mcd500'}, start_time_s=0.5)
+    server.open_pty()
+    server.start()
+    try:
+        params = write_params(tmp_path / 'one.yaml', {'port': server.pty_path, 'parity': 'N'},
+                              {'solo': {'family': 'mcd', 'address': 20, 'poll_rate': 10.0}})
+        process = start_node(params, namespace='/line2')
+        client = RosClient(['solo'], namespace='/line2')
+        try:
+            assert client.wait_state('solo', 'ready', 15.0)
+            assert client.call('solo', 'start').success
+            assert client.wait_state('solo', 'running')
+        finally:
+            client.close()
+        code, stderr = stop_node(process)
+        assert code == 0, stderr
+        assert list(server.devices[20].model.commands_received) == [1, 2]  # start, stop
+        assert 'stop acknowledged by solo' in stderr
+    finally:
+        server.stop()

@@ -1,0 +1,131 @@
+"""Run the node in a subprocess and drive it through real rclpy clients."""
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Dict, List
+
+from diagnostic_msgs.msg import DiagnosticArray
+import rclpy
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from std_msgs.msg import Float32, String, UInt16
+from std_srvs.srv import Trigger
+
+import yaml  # noqa: I100 - pyyaml comes with the ROS wheels
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class _QuotingDumper(yaml.SafeDumper):
+    """Quote every string, as users must (an unquoted N is YAML false)."""
+
+
+_QuotingDumper.add_representer(
+    str, lambda dumper, value: dumper.represent_scalar('tag:yaml.org,2002:str', value,
+                                                       style="'"))
+
+
+def write_params(path, bus: Dict, devices: Dict[str, Dict]) -> str:
+    """Write a params file for the node and return its path."""
+    parameters = {**bus, 'devices': list(devices)}
+    parameters.update(devices)
+    with open(path, 'w') as stream:
+        yaml.dump({'/**/drive_bridge': {'ros__parameters': parameters}}, stream,
+                  Dumper=_QuotingDumper)
+    return str(path)
+
+
+def start_node(params_file: str, namespace: str = '') -> subprocess.Popen:
+    """Start drive_bridge_node in a subprocess with the test environment."""
+    command = [sys.executable, '-m', 'drive_bridge.ros.node', '--ros-args',
+               '--params-file', params_file]
+    if namespace:
+        command += ['-r', f'__ns:={namespace}']
+    log = tempfile.NamedTemporaryFile('w+', prefix='drive_bridge_node_', suffix='.log')
+    process = subprocess.Popen(command, env=dict(os.environ), stdout=log, stderr=log,
+                               text=True)
+    process.log = log  # a file, not a pipe: a full pipe would block the node's logging
+    return process
+
+
+def node_output(process: subprocess.Popen) -> str:
+    """Return what the node printed so far."""
+    process.log.flush()
+    process.log.seek(0)
+    return process.log.read()
+
+
+def stop_node(process: subprocess.Popen, timeout_s: float = 10.0):
+    """SIGTERM the node and return (exit code, stderr)."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGTERM)
+    try:
+        process.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+    return process.returncode, node_output(process)
+
+
+class RosClient:
+    """An rclpy node that records a device's topics and calls its services."""
+
+    def __init__(self, names: List[str], namespace: str = ''):
+        self.node = rclpy.create_node(f'test_client_{os.getpid()}')
+        self.prefix = namespace.rstrip('/') + '/' if namespace else ''
+        self.messages: Dict[str, list] = {}
+        for name in names:
+            for topic, kind, qos in (('state', String, LATCHED), ('trip', String, LATCHED),
+                                     ('motor_current', Float32, 10),
+                                     ('motor_temperature', Float32, 10),
+                                     ('trip_code', UInt16, 10), ('status_word', UInt16, 10)):
+                self._record(f'{self.prefix}{name}/{topic}', kind, qos)
+        self._record('/diagnostics', DiagnosticArray, 10)
+        # Clients are made once, up front: a client created just before a call can lose its
+        # first response while the server has not yet discovered the client's reply reader.
+        self.clients = {(name, command): self.node.create_client(
+            Trigger, f'{self.prefix}{name}/{command}')
+            for name in names for command in ('start', 'stop', 'quick_stop', 'reset')}
+
+    def _record(self, topic, kind, qos):
+        self.messages[topic] = []
+        self.node.create_subscription(kind, topic, self.messages[topic].append, qos)
+
+    def values(self, name: str, topic: str) -> list:
+        return [m.data for m in self.messages[f'{self.prefix}{name}/{topic}']]
+
+    def spin_until(self, predicate, timeout_s: float = 10.0) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        return bool(predicate())
+
+    def state(self, name: str) -> str:
+        states = self.values(name, 'state')
+        return states[-1] if states else ''
+
+    def wait_state(self, name: str, state: str, timeout_s: float = 10.0) -> bool:
+        return self.spin_until(lambda: self.state(name) == state, timeout_s)
+
+    def call(self, name: str, command: str, timeout_s: float = 10.0) -> Trigger.Response:
+        client = self.clients[(name, command)]
+        assert client.wait_for_service(timeout_sec=timeout_s), f'no {name}/{command}'
+        future = client.call_async(Trigger.Request())
+        rclpy.spin_until_future_complete(self.node, future, timeout_sec=timeout_s)
+        assert future.done(), f'{name}/{command} did not answer'
+        return future.result()
+
+    def diagnostics(self, name: str):
+        for array in reversed(self.messages['/diagnostics']):
+            for status in array.status:
+                if status.name == f'drive_bridge: {name}':
+                    return status
+        return None
+
+    def close(self):
+        self.node.destroy_node()

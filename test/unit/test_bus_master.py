@@ -1,0 +1,247 @@
+"""Unit tests of the bus master with a fake clock and a fake transport (no threads)."""
+
+import re
+
+import pytest
+
+from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
+from drive_bridge.devices import mcd
+from drive_bridge.devices.base import ReadRegisters, WriteRegister
+from drive_bridge.errors import (
+    BadFrame, CommandRefused, DeviceException, LinkDown, NoResponse, TransportError)
+
+TIMEOUT_S = 0.5
+RTT_S = 0.02
+
+
+class FakeClock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+    def sleep(self, seconds):
+        self.now += seconds
+
+
+class FakeTransport:
+    """Devices by unit: a status word to report, or an error to raise."""
+
+    def __init__(self, clock):
+        self.clock = clock
+        self.connected = False
+        self.link_ok = True
+        self.status = {}
+        self.failures = {}
+        self.write_error = {}
+        self.log = []
+
+    def connect(self):
+        if not self.link_ok:
+            raise LinkDown('bus offline: /dev/ttyFAKE not found')
+        self.connected = True
+
+    def close(self):
+        self.connected = False
+
+    def execute(self, unit, transaction):
+        self.log.append((self.clock.now, unit, transaction))
+        failure = self.failures.get(unit)
+        if failure is not None:
+            self.clock.now += TIMEOUT_S if isinstance(failure, NoResponse) else RTT_S
+            if isinstance(failure, LinkDown):
+                self.connected = False
+            raise failure
+        self.clock.now += RTT_S
+        if isinstance(transaction, WriteRegister):
+            if unit in self.write_error:
+                raise self.write_error[unit]
+            return None
+        assert transaction == ReadRegisters(2, 6)
+        return [self.status.get(unit, 1), 255, 0, 0, (7 << 3) | 1, 1]
+
+    def polls(self, unit):
+        return [t for t, u, txn in self.log if u == unit and isinstance(txn, ReadRegisters)]
+
+
+def make_bus(units, rates=None, timing=None, allow=None):
+    clock = FakeClock()
+    transport = FakeTransport(clock)
+    events = []
+    specs = [DeviceSpec(f'd{unit}', unit, mcd.McdProfile('mcd500'),
+                        poll_rate_hz=(rates or {}).get(unit, 5.0),
+                        allow_control=(allow or {}).get(unit, True)) for unit in units]
+    bus = BusMaster(transport, specs, timing or BusTiming(), listener=events.append,
+                    clock=clock, sleep=clock.sleep)
+    return bus, transport, clock, events
+
+
+def run_for(bus, clock, seconds):
+    end = clock.now + seconds
+    while clock.now < end:
+        wait = bus.run_once()
+        if wait > 0:
+            clock.now += min(wait, end - clock.now)
+
+
+def test_each_device_polled_at_its_rate():
+    bus, transport, clock, _ = make_bus([1, 2], rates={1: 5.0, 2: 1.0})
+    run_for(bus, clock, 10.0)
+    assert len(transport.polls(1)) in (50, 51)
+    assert len(transport.polls(2)) in (10, 11)
+
+
+def test_reading_events_carry_decoded_state():
+    bus, transport, clock, events = make_bus([1])
+    transport.status[1] = 3
+    run_for(bus, clock, 0.1)
+    assert [e.kind for e in events] == ['online', 'reading']
+    assert events[1].reading.state == 'running'
+    assert bus.snapshot('d1').online is True
+
+
+def test_command_goes_before_waiting_polls_and_is_acknowledged():
+    bus, transport, clock, _ = make_bus([1, 2])
+    run_for(bus, clock, 0.5)
+    clock.now += 1.0  # both devices now have a poll waiting
+    future = bus.submit_command('d1', 'start')
+    bus.run_once()
+    assert transport.log[-1][2] == WriteRegister(1, 1)
+    assert future.result(timeout=0) == 'start acknowledged by d1 (address 1)'
+    assert bus.snapshot('d1').started_by_bridge
+
+
+def test_dead_device_goes_offline_and_costs_one_timeout_per_backoff():
+    timing = BusTiming(retries=2, offline_after=3, backoff_initial_s=1.0, backoff_max_s=8.0)
+    bus, transport, clock, events = make_bus([1, 2], timing=timing)
+    run_for(bus, clock, 1.0)
+    transport.failures[2] = NoResponse('no reply within 0.5 s')
+    run_for(bus, clock, 60.0)
+    offline = [e for e in events if e.kind == 'offline']
+    assert [e.device for e in offline] == ['d2']
+    attempts = [t for t in transport.polls(2) if t > 1.0]
+    # 3 attempts to go offline, then probes 1, 2, 4, 8, 8, ... s apart: one timeout each.
+    gaps = [b - a for a, b in zip(attempts[3:], attempts[4:])]
+    assert len(attempts) < 3 + 12
+    assert all(gap >= 1.0 for gap in gaps)
+    assert max(gaps) <= 8.0 + TIMEOUT_S + 2 * RTT_S + 0.3
+
+
+def test_healthy_device_keeps_its_rate_while_another_is_dead():
+    bus, transport, clock, _ = make_bus([1, 2], rates={1: 5.0, 2: 5.0})
+    transport.failures[2] = NoResponse('no reply')
+    run_for(bus, clock, 30.0)
+    polls = transport.polls(1)
+    longest_gap = max(b - a for a, b in zip(polls, polls[1:]))
+    # at most one poll period plus the one retry chain before going offline (3 timeouts)
+    assert longest_gap <= 0.2 + 3 * TIMEOUT_S + 0.1
+    late = [t for t in polls if t > 5.0]
+    late_gap = max(b - a for a, b in zip(late, late[1:]))
+    assert late_gap <= 0.2 + TIMEOUT_S + 0.05  # offline: at most one timeout in the way
+
+
+def test_device_comes_back_online():
+    bus, transport, clock, events = make_bus([1])
+    transport.failures[1] = NoResponse('no reply')
+    run_for(bus, clock, 5.0)
+    del transport.failures[1]
+    run_for(bus, clock, 10.0)
+    kinds = [e.kind for e in events if e.kind != 'reading']
+    assert kinds == ['offline', 'online']
+    assert bus.snapshot('d1').online is True
+
+
+def test_single_bad_frame_is_retried_not_offline():
+    bus, transport, clock, events = make_bus([1])
+    run_for(bus, clock, 0.5)
+    transport.failures[1] = BadFrame('CRC')
+    clock.now += 0.2  # the next poll is due
+    bus.run_once()  # every attempt fails: the retries happen within this poll
+    assert bus.snapshot('d1').stats['retries'] == '2'
+    assert bus.snapshot('d1').stats['errors_bad_frame'] == '3'
+
+
+def test_lost_link_marks_everything_offline_at_once_and_reconnects():
+    bus, transport, clock, events = make_bus([1, 2])
+    run_for(bus, clock, 0.5)
+    transport.failures[1] = LinkDown('bus offline: /dev/ttyFAKE not found')
+    transport.link_ok = False
+    run_for(bus, clock, 0.3)
+    offline = {e.device for e in events if e.kind == 'offline'}
+    assert offline == {'d1', 'd2'}
+    refused = bus.submit_command('d2', 'start')
+    with pytest.raises(CommandRefused, match='not found: nothing sent'):
+        refused.result(timeout=0)
+    del transport.failures[1]
+    transport.link_ok = True
+    run_for(bus, clock, 12.0)
+    assert bus.snapshot('d1').online and bus.snapshot('d2').online
+    assert bus.link_error == ''
+
+
+def test_commands_refused_before_sending():
+    bus, transport, clock, _ = make_bus([1, 2, 3], allow={2: False})
+    transport.failures[3] = NoResponse('no reply')
+    run_for(bus, clock, 3.0)
+    writes_before = [x for x in transport.log if isinstance(x[2], WriteRegister)]
+    cases = {
+        ('d2', 'start'): 'monitor only (allow_control is false): nothing sent',
+        ('d3', 'start'): 'is offline',
+        ('nope', 'start'): "unknown device 'nope'",
+        ('d1', 'coast_stop'): 'no coast_stop command',
+    }
+    for (name, command), text in cases.items():
+        with pytest.raises(CommandRefused, match=re.escape(text)):
+            bus.submit_command(name, command).result(timeout=0)
+    transport.status[1] = 6
+    run_for(bus, clock, 0.5)
+    with pytest.raises(CommandRefused, match='tripped .* reset it first'):
+        bus.submit_command('d1', 'start').result(timeout=0)
+    assert [x for x in transport.log if isinstance(x[2], WriteRegister)] == writes_before
+
+
+def test_device_refusal_is_reported_in_technician_words():
+    bus, transport, clock, _ = make_bus([1])
+    run_for(bus, clock, 0.3)
+    transport.write_error[1] = DeviceException(9)
+    future = bus.submit_command('d1', 'start')
+    bus.run_once()
+    with pytest.raises(CommandRefused) as error:
+        future.result(timeout=0)
+    assert str(error.value) == ('rejected by d1: network control disabled (Hand On mode or '
+                                'par. 3-2); set the starter to Auto On and par. 3-2 Comms in '
+                                'Remote to enable (unsupported command), Modbus error 09')
+    assert not bus.snapshot('d1').started_by_bridge
+
+
+def test_unacknowledged_command_is_not_repeated():
+    bus, transport, clock, _ = make_bus([1])
+    run_for(bus, clock, 0.3)
+    transport.write_error[1] = NoResponse('no reply within 0.5 s')
+    future = bus.submit_command('d1', 'start')
+    run_for(bus, clock, 0.05)
+    with pytest.raises(TransportError, match='may or may not have been executed'):
+        future.result(timeout=0)
+    writes = [x for x in transport.log if isinstance(x[2], WriteRegister)]
+    assert len(writes) == 1
+    assert bus.snapshot('d1').started_by_bridge  # it may have started: stop on shutdown
+
+
+def test_parameter_read_and_write_jobs():
+    bus, transport, clock, _ = make_bus([1])
+    run_for(bus, clock, 0.3)
+    write = bus.write_parameter('d1', 4, 400)
+    bus.run_once()
+    assert transport.log[-1][2] == WriteRegister(11, 400)
+    assert 'acknowledged' in write.result(timeout=0)
+    with pytest.raises(CommandRefused, match='out of range'):
+        bus.read_parameter('d1', 0).result(timeout=0)
+
+
+def test_statistics_count_transactions_and_round_trip():
+    bus, transport, clock, _ = make_bus([1])
+    run_for(bus, clock, 1.0)
+    stats = bus.snapshot('d1').stats
+    assert int(stats['transactions']) >= 5
+    assert stats['rtt_avg_ms'] == '20.0' and stats['errors'] == '0'

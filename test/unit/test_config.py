@@ -1,0 +1,78 @@
+"""Unit tests of configuration validation: one clear line per bad value."""
+
+import math
+
+import pytest
+
+from drive_bridge import config
+from drive_bridge.errors import ConfigError
+
+GOOD_DEVICE = {'family': 'mcd', 'model': 'mcd500', 'address': 20}
+
+
+def build(bus=None, devices=None):
+    bus_values = {'devices': ['starter'], **(bus or {})}
+    return config.build_config(bus_values, devices if devices is not None
+                               else {'starter': dict(GOOD_DEVICE)})
+
+
+def test_defaults_follow_the_contract():
+    built = build()
+    assert built.link.protocol == 'modbus_rtu' and built.link.parity == 'E'
+    assert built.link.baudrate == 9600 and built.link.timeout_s == 0.5
+    assert built.link.effective_stopbits == 1
+    assert built.timing.retries == 2
+    assert built.timing.frame_gap_s == pytest.approx(3.5 * 11 / 9600)
+    device = built.devices[0]
+    assert (device.poll_rate, device.allow_control, device.stop_on_shutdown) == (5.0, True, True)
+
+
+def test_no_parity_means_two_stop_bits():
+    assert build({'parity': 'N'}).link.effective_stopbits == 2
+
+
+def test_int_is_accepted_for_a_double():
+    assert build(devices={'starter': {**GOOD_DEVICE, 'poll_rate': 10}}).devices[0].poll_rate == 10.0
+
+
+@pytest.mark.parametrize('bus, device, message', [
+    ({}, {'family': 'abc'}, "parameter 'starter.family' = 'abc' is invalid: allowed mcd"),
+    ({}, {'family': 'fc'}, "'starter.family' = 'fc' is not implemented in this version"),
+    ({}, {'model': 'mcd999'},
+     "'starter.model' = 'mcd999' is invalid for family mcd: allowed auto, mcd201"),
+    ({}, {'address': 150}, "'starter.address' = 150 is out of range for family mcd: allowed 1-99"),
+    ({}, {'address': None}, "parameter 'starter.address' is required"),
+    ({}, {'poll_rate': 0.0}, "'starter.poll_rate' = 0.0 is out of range: allowed [0.1, 100]"),
+    ({}, {'poll_rate': math.nan}, 'must be a finite number'),
+    ({}, {'allow_control': 'yes'}, "'starter.allow_control' = 'yes' has the wrong type"),
+    ({'parity': False}, {}, 'write parity: "N" with quotes'),
+    ({'parity': 'X'}, {}, "parameter 'parity' = 'X' is invalid: allowed N, E, O"),
+    ({'baudrate': 9601}, {}, "parameter 'baudrate' = 9601 is invalid"),
+    ({'protocol': 'ap_ascii'}, {}, "'protocol' = 'ap_ascii' is not implemented in this version"),
+    ({'protocol': 'canopen'}, {}, "parameter 'protocol' = 'canopen' is invalid"),
+    ({'timeout': 0.0}, {}, "parameter 'timeout' = 0.0 is out of range"),
+])
+def test_bad_values_give_one_clear_line(bus, device, message):
+    with pytest.raises(ConfigError) as error:
+        build(bus, {'starter': {**GOOD_DEVICE, **device}})
+    assert message in str(error.value)
+    assert '\n' not in str(error.value)
+
+
+def test_device_list_errors():
+    with pytest.raises(ConfigError, match="'devices' is empty"):
+        config.build_config({'devices': []}, {})
+    with pytest.raises(ConfigError, match="'devices' is required"):
+        config.build_config({}, {})
+    with pytest.raises(ConfigError, match='is invalid: use a letter'):
+        config.build_config({'devices': ['1bad']}, {})
+    with pytest.raises(ConfigError, match='listed twice'):
+        config.build_config({'devices': ['a', 'a']}, {'a': GOOD_DEVICE})
+    with pytest.raises(ConfigError, match="is also the address of 'a'"):
+        config.build_config({'devices': ['a', 'b']}, {'a': GOOD_DEVICE, 'b': GOOD_DEVICE})
+
+
+def test_make_spec_builds_the_profile():
+    spec = build().devices[0].make_spec()
+    assert spec.unit == 20 and spec.profile.family == 'mcd'
+    assert spec.profile.configured_model == 'mcd500'

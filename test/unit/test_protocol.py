@@ -1,0 +1,111 @@
+"""Unit tests of the pure codecs: CRC, RTU framing, words and FC scaling."""
+
+import math
+
+import pytest
+
+from drive_bridge.protocol import crc, fc_scaling, rtu, words
+
+
+def hexbytes(text):
+    return bytes.fromhex(text)
+
+
+# Worked frames with CRCs from the VLT 5000/6000 Modbus RTU option card manual and the
+# FC-series notes (shared/manuals/README.md, shared/research/protocols.md).
+MANUAL_FRAMES = [
+    '01 0F 00 00 00 20 04 7C 04 99 19 37 43',  # start at 40 %
+    '01 0F 00 00 00 20 54 13',  # its reply
+    '01 0F 00 00 00 20 04 3C 04 00 00 89 19',  # ramp stop
+    '01 03 3F 0B 00 02 B9 DD',  # read 16-14 (motor current) from drive 1
+]
+
+
+@pytest.mark.parametrize('frame', MANUAL_FRAMES)
+def test_crc_of_manual_frames(frame):
+    data = hexbytes(frame)
+    assert crc.append_crc(data[:-2]) == data
+    assert crc.crc_ok(data)
+    corrupted = bytes([data[0] ^ 1]) + data[1:]
+    assert not crc.crc_ok(corrupted)
+
+
+def test_crc_check_value_of_the_standard():
+    # CRC-16/MODBUS catalogue check value for the ASCII digits 1-9.
+    assert crc.crc16_modbus(b'123456789') == 0x4B37
+
+
+def test_mcd_manual_examples_encode_to_frames():
+    # Manual 000, section 8.1: starter address 20, register 40002 = 1 (start).
+    start = rtu.write_register_request(20, 40002 - 40001, 1).encode()
+    assert start[:6] == hexbytes('14 06 00 01 00 01') and crc.crc_ok(start)
+    # Read 40003 (status), 40004 (trip code), 40009 (parameter 1).
+    assert rtu.read_registers_request(20, 2, 1).encode()[:6] == hexbytes('14 03 00 02 00 01')
+    assert rtu.read_registers_request(20, 3, 1).encode()[:6] == hexbytes('14 03 00 03 00 01')
+    assert rtu.read_registers_request(20, 8, 1).encode()[:6] == hexbytes('14 03 00 08 00 01')
+    # Write 40012 (parameter 4, current limit) = 400.
+    write = rtu.write_register_request(20, 11, 400).encode()
+    assert write[:6] == hexbytes('14 06 00 0B 01 90')
+
+
+def test_decode_request_needs_more_bytes_then_frame():
+    frame = rtu.read_registers_request(20, 2, 6).encode()
+    for cut in range(len(frame)):
+        assert rtu.decode_request(frame[:cut]) == rtu.DecodeResult()
+    result = rtu.decode_request(frame + b'\x14')
+    assert result.consumed == len(frame)
+    assert result.frame == rtu.RtuFrame(20, 3, hexbytes('00 02 00 06'))
+
+
+def test_decode_request_drops_crc_errors_and_truncated_frames():
+    frame = bytearray(rtu.write_register_request(1, 1, 2).encode())
+    frame[-1] ^= 0xFF
+    assert rtu.decode_request(bytes(frame)).error == 'CRC error'
+    assert rtu.decode_request(bytes(frame[:5]), gap_elapsed=True).error == 'truncated frame'
+
+
+def test_decode_counted_and_unknown_functions():
+    body = bytes([1, 0x0F, 0, 0, 0, 0x20, 4, 0x7C, 4, 0x99, 0x19])
+    frame = crc.append_crc(body)
+    assert rtu.decode_request(frame).frame.function == 0x0F
+    unknown = crc.append_crc(bytes([1, 0x2B, 0x0E, 1, 0]))
+    assert rtu.decode_request(unknown).consumed == 0  # waits for the gap
+    assert rtu.decode_request(unknown, gap_elapsed=True).frame.function == 0x2B
+
+
+def test_character_and_gap_times():
+    assert rtu.character_bits('E', 1) == 11 and rtu.character_bits('N', 2) == 11
+    assert rtu.character_time_s(9600, 'E', 1) == pytest.approx(11 / 9600)
+    assert rtu.frame_gap_s(9600, 'E', 1) == pytest.approx(3.5 * 11 / 9600)
+    assert rtu.frame_gap_s(38400) == 0.00175
+    assert rtu.default_stopbits('N') == 2 and rtu.default_stopbits('E') == 1
+
+
+def test_words():
+    assert words.bits(0b1011_0110, 3, 7) == 0b10110
+    assert words.bit(0x40, 6) and not words.bit(0x40, 5)
+    assert words.to_signed16(0xC000) == -16384 and words.from_signed16(-16384) == 0xC000
+    assert words.join_u32(*words.split_u32(0x12345678)) == 0x12345678
+    with pytest.raises(ValueError):
+        words.from_signed16(40000)
+
+
+@pytest.mark.parametrize('percent, word', [
+    (40.0, 0x1999),  # the VLT option card manual's example
+    (100.0, 0x4000), (50.0, 0x2000), (0.0, 0x0000),
+    (-200.0, 0x8000), (-100.0, 0xC000), (199.99, 0x7FFE), (-40.0, 0xE667),
+])
+def test_fc_scaling(percent, word):
+    assert fc_scaling.percent_to_word(percent) == word
+
+
+@pytest.mark.parametrize('bad', [200.0, 250.0, -200.01, math.nan, math.inf, -math.inf])
+def test_fc_scaling_rejects(bad):
+    with pytest.raises(ValueError):
+        fc_scaling.percent_to_word(bad)
+
+
+def test_fc_actual_value_decodes_signed():
+    assert fc_scaling.word_to_percent(0x4000) == 100.0
+    assert fc_scaling.word_to_percent(0xC000) == -100.0
+    assert fc_scaling.word_to_percent(0x1999) == pytest.approx(39.996, abs=1e-3)
