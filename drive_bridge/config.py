@@ -1,4 +1,5 @@
-"""Configuration: every bus and device setting as data, validated into typed objects.
+"""
+Configuration: every bus and device setting as data, validated into typed objects.
 
 The ROS node declares its parameters from these tables (types, defaults, ranges, text) and
 the tools use the same validation, so a bad value gets the same one-line message anywhere.
@@ -24,7 +25,8 @@ DEVICE_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
 @dataclass(frozen=True)
 class Setting:
-    """One parameter: name, Python type, default (None = required), limits and meaning.
+    """
+    One parameter: name, Python type, default (None = required), limits and meaning.
 
     ``low``/``high`` bound numbers (``high_open``: high itself excluded); ``choices`` bound
     strings and ints; ``runtime`` settings may be changed with ``ros2 param set``.

@@ -21,8 +21,8 @@ fi
 "$venv/bin/python" -m pip install --quiet --upgrade pip 2>&1 | grep -v '^WARNING: Location' >&2 || true
 "$venv/bin/python" -m pip install --quiet -r "$root/$requirements" "$@" 2>&1 \
   | grep -v '^WARNING: Location' >&2 || true
-"$venv/bin/python" -m pip install --quiet --no-deps -e "$root" 2>&1 \
-  | grep -v '^WARNING: Location' >&2 || true
+"$venv/bin/python" -m pip install --quiet --no-deps -e "$root" > "$venv/install.log" 2>&1 \
+  || { cat "$venv/install.log" >&2; exit 1; }
 "$venv/bin/python" -c 'import pymodbus, serial, drive_bridge' \
   || { echo "install into $venv failed" >&2; exit 1; }
 echo "$want" > "$stamp"

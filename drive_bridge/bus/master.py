@@ -1,4 +1,5 @@
-"""The bus master: one thread owns one bus and everything that happens on it.
+"""
+The bus master: one thread owns one bus and everything that happens on it.
 
 Each device is polled at its own rate; a command goes before any waiting poll; a device
 that stops answering is marked offline after ``offline_after`` failed transactions in a
@@ -211,7 +212,8 @@ class BusMaster:
             self._devices[name].spec.poll_rate_hz = rate_hz
 
     def submit_command(self, name: str, command: str) -> Future:
-        """Queue ``command`` for device ``name``; the future gives the outcome in words.
+        """
+        Queue ``command`` for device ``name``; the future gives the outcome in words.
 
         A command that is refused before sending resolves at once with CommandRefused.
         """
@@ -296,7 +298,8 @@ class BusMaster:
                 self._wake.clear()
 
     def shutdown(self, stop_motors: bool = True, timeout_s: float = 3.0) -> List[str]:
-        """Stop the motors this bridge started (if asked), stop the thread, close the link.
+        """
+        Stop the motors this bridge started (if asked), stop the thread, close the link.
 
         Returns what happened to each stop, in words.
         """

@@ -34,7 +34,8 @@ Transaction = object  # ReadRegisters | WriteRegister; later families add their 
 
 @dataclass
 class DeviceReading:
-    """One decoded poll of a device, in the units of the ROS contract.
+    """
+    One decoded poll of a device, in the units of the ROS contract.
 
     Optional fields are None where the device or model does not report them.
     ``details`` carries every decoded field as text for /diagnostics; ``warnings`` lists

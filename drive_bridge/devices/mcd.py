@@ -1,4 +1,5 @@
-"""MCD soft starters: MCD 201/202/500 via the MCD Modbus Module, MCD 3000 via the Remote Operator.
+"""
+MCD soft starters: MCD 201/202/500 via the MCD Modbus Module, MCD 3000 via the Remote Operator.
 
 Every table here comes from the manual ``000_b701c31669ff8873.txt`` ("Installation
 Instructions: MCD Modbus Module", order code 175G9000); each names its section.
@@ -14,7 +15,8 @@ from drive_bridge.protocol.words import bit, bits
 
 FAMILY = 'mcd'
 MODELS = ('auto', 'mcd201', 'mcd202', 'mcd500', 'mcd3000')
-ADDRESS_RANGE = (1, 99)  # Module DIP switches: 0-31 (0 is Modbus broadcast); Remote Operator: 1-99.
+# Module DIP switches: 0-31 (0 is Modbus broadcast); Remote Operator: 1-99.
+ADDRESS_RANGE = (1, 99)
 
 
 @dataclass(frozen=True)
@@ -194,7 +196,8 @@ def decode_product_word(word: int) -> Tuple[int, int]:
 
 
 def resolve_model(configured: str, product_word: int) -> str:
-    """Return the model to use for a device reporting ``product_word`` in 40007.
+    """
+    Return the model to use for a device reporting ``product_word`` in 40007.
 
     Raises ModelMismatch when the configured model is not the product the device reports.
     """

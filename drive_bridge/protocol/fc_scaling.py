@@ -1,4 +1,5 @@
-"""FC-profile bus reference scaling: 0x4000 = 100 %, signed, two's complement for reverse.
+"""
+FC-profile bus reference scaling: 0x4000 = 100 %, signed, two's complement for reverse.
 
 Source: VLT 5000/6000 Modbus RTU option card manual (40 % is written as 0x1999) and the
 FC 51 manual, chapter 5 (bus speed reference). ``int(percent * 0x4000 / 100)`` rounds

@@ -1,4 +1,5 @@
-"""Modbus RTU framing, pure: request/response PDUs, ADUs with CRC, and a request decoder.
+"""
+Modbus RTU framing, pure: request/response PDUs, ADUs with CRC, and a request decoder.
 
 The decoder follows the contract of pymodbus's framers: it is given the bytes received so
 far and answers with a complete frame and how many bytes it used, with "need more bytes",
@@ -51,7 +52,8 @@ class RtuFrame:
 
 @dataclass(frozen=True)
 class DecodeResult:
-    """What the decoder made of a buffer.
+    """
+    What the decoder made of a buffer.
 
     ``frame`` is set when a whole valid frame was found; ``consumed`` bytes of the buffer
     are used up (a frame, or garbage to drop); both unset/zero means "need more bytes".
@@ -64,7 +66,8 @@ class DecodeResult:
 
 
 def expected_request_length(buffer: bytes) -> Optional[int]:
-    """Return the length of the request starting at ``buffer[0]``, or None if unknown yet.
+    """
+    Return the length of the request starting at ``buffer[0]``, or None if unknown yet.
 
     Returns -1 for a function code whose request length cannot be known from its header.
     """
@@ -83,7 +86,8 @@ def expected_request_length(buffer: bytes) -> Optional[int]:
 
 
 def decode_request(buffer: bytes, gap_elapsed: bool = False) -> DecodeResult:
-    """Decode one request from the start of ``buffer``.
+    """
+    Decode one request from the start of ``buffer``.
 
     ``gap_elapsed`` tells that the line has been silent for 3.5 characters since the last
     byte: then a frame of unknown function ends where the buffer ends, and an incomplete

@@ -1,4 +1,5 @@
-"""The ROS 2 node ``drive_bridge``: one bus, several devices, the contract's topics and services.
+"""
+The ROS 2 node ``drive_bridge``: one bus, several devices, the contract's topics and services.
 
 Bus I/O never runs in a ROS callback: the bus thread reports readings through a queue and
 a guard condition (published by the executor), and service callbacks only queue a command
@@ -10,6 +11,10 @@ import sys
 from typing import Any, Dict, List, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from drive_bridge import config as cfg
+from drive_bridge.bus.master import BusEvent, BusMaster, DeviceSnapshot
+from drive_bridge.errors import ConfigError, DriveBridgeError
+from drive_bridge.transport.modbus import ModbusTransport
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 import rclpy
@@ -19,11 +24,6 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float32, String, UInt16
 from std_srvs.srv import Trigger
-
-from drive_bridge import config as cfg
-from drive_bridge.bus.master import BusEvent, BusMaster, DeviceSnapshot
-from drive_bridge.errors import ConfigError, DriveBridgeError
-from drive_bridge.transport.modbus import ModbusTransport
 
 NODE_NAME = 'drive_bridge'
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,

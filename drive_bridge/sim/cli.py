@@ -1,4 +1,5 @@
-"""``drive_bridge_sim``: simulated devices on a pty or a TCP port, for tests and commissioning.
+"""
+``drive_bridge_sim``: simulated devices on a pty or a TCP port, for tests and commissioning.
 
 Examples::
 

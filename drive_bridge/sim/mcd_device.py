@@ -36,7 +36,8 @@ class McdSimDevice:
 
 
 def make_mcd_server(models: Dict[int, str], wire=None, **settings) -> ModbusSimServer:
-    """Return a simulated bus with one MCD per address: ``{20: 'mcd500', 21: 'mcd202'}``.
+    """
+    Return a simulated bus with one MCD per address: ``{20: 'mcd500', 21: 'mcd202'}``.
 
     ``settings`` go to every device's :class:`McdSimConfig` (e.g. ``start_time_s=0.5``).
     """

@@ -1,4 +1,5 @@
-"""Behaviour model of an MCD soft starter behind the MCD Modbus Module, with explicit time.
+"""
+Behaviour model of an MCD soft starter behind the MCD Modbus Module, with explicit time.
 
 Pure: no I/O and no clock of its own; every call takes ``now_s``. The register map, error
 codes and per-model features are the device profile's tables

@@ -1,4 +1,5 @@
-"""A Modbus slave bus for the simulators: RTU on a pty, Modbus TCP, or RTU over TCP.
+"""
+A Modbus slave bus for the simulators: RTU on a pty, Modbus TCP, or RTU over TCP.
 
 Hand-written rather than pymodbus's server so that it behaves like a real RS-485 line:
 addresses it does not serve stay silent (pymodbus answers them with exception 4), vendor

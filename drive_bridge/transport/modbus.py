@@ -1,4 +1,5 @@
-"""Modbus RTU (serial), Modbus TCP and RTU over TCP through pymodbus, 3.6.9 to 3.16.
+"""
+Modbus RTU (serial), Modbus TCP and RTU over TCP through pymodbus, 3.6.9 to 3.16.
 
 One adapter hides the API differences: the unit keyword (``slave=`` before 3.10,
 ``device_id=`` after), the framer enum (``Framer`` / ``FramerType``), whether errors are
@@ -13,13 +14,12 @@ import logging
 import os
 from typing import List, Optional
 
-import pymodbus
-from pymodbus.client import ModbusSerialClient, ModbusTcpClient
-from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
-
 from drive_bridge.devices.base import ReadRegisters, WriteRegister
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
 from drive_bridge.protocol import rtu
+import pymodbus
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
 try:  # pymodbus >= 3.7
     from pymodbus import FramerType as _Framer
@@ -223,4 +223,3 @@ def wire_time_s(settings: LinkSettings, request_bytes: int, reply_bytes: int) ->
                                   settings.effective_stopbits)
     gap_s = rtu.frame_gap_s(settings.baudrate, settings.parity, settings.effective_stopbits)
     return (request_bytes + reply_bytes) * char_s + 2 * gap_s
-

@@ -1,9 +1,8 @@
 """Simulated MCD buses for the integration tier."""
 
 
-import pytest
-
 from drive_bridge.sim.mcd_device import make_mcd_server
+import pytest
 
 
 def make_server(models):

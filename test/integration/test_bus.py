@@ -2,13 +2,12 @@
 
 import time
 
-import pytest
-
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import CommandRefused
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from integration_helpers import wait_until
+import pytest
 
 
 @pytest.fixture

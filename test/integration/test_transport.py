@@ -2,12 +2,11 @@
 
 import time
 
-import pytest
-
 from drive_bridge.devices.base import ReadRegisters, WriteRegister
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
-from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from drive_bridge.sim.mcd_device import make_mcd_server as make_server
+from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
+import pytest
 
 MCD500_PRODUCT = (7 << 3) | 1
 

@@ -1,12 +1,11 @@
 """The node in a subprocess against the simulator, driven through rclpy clients."""
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from drive_bridge.sim.mcd_device import make_mcd_server
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 import rclpy
-
-from drive_bridge.sim.mcd_device import make_mcd_server
 from ros_helpers import node_output, RosClient, start_node, stop_node, write_params
 
 DEVICES = {

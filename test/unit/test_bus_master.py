@@ -2,13 +2,12 @@
 
 import re
 
-import pytest
-
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices import mcd
 from drive_bridge.devices.base import ReadRegisters, WriteRegister
 from drive_bridge.errors import (
     BadFrame, CommandRefused, DeviceException, LinkDown, NoResponse, TransportError)
+import pytest
 
 TIMEOUT_S = 0.5
 RTT_S = 0.02

@@ -2,10 +2,9 @@
 
 import math
 
-import pytest
-
 from drive_bridge import config
 from drive_bridge.errors import ConfigError
+import pytest
 
 GOOD_DEVICE = {'family': 'mcd', 'model': 'mcd500', 'address': 20}
 
@@ -32,7 +31,8 @@ def test_no_parity_means_two_stop_bits():
 
 
 def test_int_is_accepted_for_a_double():
-    assert build(devices={'starter': {**GOOD_DEVICE, 'poll_rate': 10}}).devices[0].poll_rate == 10.0
+    built = build(devices={'starter': {**GOOD_DEVICE, 'poll_rate': 10}})
+    assert built.devices[0].poll_rate == 10.0
 
 
 @pytest.mark.parametrize('bus, device, message', [

@@ -1,11 +1,10 @@
 """Unit tests of the MCD profile (decode, commands, tables) and the MCD behaviour model."""
 
-import pytest
-
 from drive_bridge.devices import mcd
 from drive_bridge.devices.base import ReadRegisters, WriteRegister
 from drive_bridge.errors import CommandRefused, ModelMismatch, ProtocolError
 from drive_bridge.sim.mcd_model import McdModel, McdSimConfig, ModuleError
+import pytest
 
 MCD500_PRODUCT = (7 << 3) | 1
 
@@ -132,7 +131,8 @@ def test_module_error_texts():
 
 def test_trip_names_per_model():
     assert mcd.trip_name(5, 'mcd201') == 'Frequency (mains supply)'
-    assert mcd.trip_name(12, 'mcd201') == 'Input A trip (auxiliary input A) (not listed for mcd201)'
+    assert mcd.trip_name(12, 'mcd201') == \
+        'Input A trip (auxiliary input A) (not listed for mcd201)'
     assert mcd.trip_name(99) == 'unknown trip code 99'
     assert set(mcd.TRIP_CODES) >= {1, 2, 15, 16, 23, 33, 36}
 

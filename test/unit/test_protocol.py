@@ -2,9 +2,8 @@
 
 import math
 
-import pytest
-
 from drive_bridge.protocol import crc, fc_scaling, rtu, words
+import pytest
 
 
 def hexbytes(text):
