@@ -1,4 +1,5 @@
-"""Benchmark: bus throughput against the wire-time limit at 9600 and 19200 baud, 8E1.
+"""
+Benchmark: bus throughput against the wire-time limit at 9600 and 19200 baud, 8E1.
 
 The simulator holds every reply back until the request and the reply would have crossed a
 real 8E1 line (3.5-character gaps included), so a pty behaves like a paced wire. Prints
@@ -32,7 +33,7 @@ def wire_limit_per_s(baudrate: int, reply_bytes: int) -> float:
 
 
 def start_server(baudrate: int):
-    server = make_mcd_server({unit: 'mcd500' for unit in UNITS},
+    server = make_mcd_server(dict.fromkeys(UNITS, 'mcd500'),
                              wire=WireTiming(baudrate, 'E', 1))
     server.open_pty()
     server.start()

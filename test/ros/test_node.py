@@ -44,12 +44,12 @@ def test_start_running_then_stop_ready(node, sim):
     assert response.success, response.message
     assert response.message == 'start acknowledged by main (address 20)'
     assert node.wait_state('main', 'running')
-    assert max(node.values('main', 'motor_current')) > 300
+    assert node.spin_until(lambda: max(node.values('main', 'motor_current')) > 300)
     assert node.call('main', 'stop').success
     assert node.wait_state('main', 'ready')
     states = node.values('main', 'state')
     assert states[-4:] == ['starting', 'running', 'stopping', 'ready']
-    assert node.values('main', 'motor_temperature')[-1] > 0
+    assert node.spin_until(lambda: node.values('main', 'motor_temperature')[-1:] > [0])
 
 
 def test_reset_after_injected_trip(node, sim):
@@ -66,7 +66,7 @@ def test_reset_after_injected_trip(node, sim):
     assert node.call('main', 'reset').success
     assert node.wait_state('main', 'ready')
     assert node.spin_until(lambda: node.values('main', 'trip_code')[-1] == 0)
-    assert node.values('main', 'trip')[-1] == ''
+    assert node.spin_until(lambda: node.values('main', 'trip')[-1] == '')
 
 
 def test_hand_on_refusal_with_reason(node, sim):
