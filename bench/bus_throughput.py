@@ -17,7 +17,8 @@ from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.protocol import rtu
 from drive_bridge.sim.mcd_device import make_mcd_server
 from drive_bridge.sim.modbus_server import WireTiming
-from drive_bridge.transport.modbus import LinkSettings, ModbusTransport, PYMODBUS_VERSION
+from drive_bridge.transport.modbus import (
+    LinkSettings, ModbusTransport, PYMODBUS_VERSION, wire_time_s)
 
 UNITS = (20, 21, 22)
 REQUEST_BYTES = 8
@@ -27,9 +28,8 @@ SINGLE_REPLY_BYTES = 5 + 2
 
 def wire_limit_per_s(baudrate: int, reply_bytes: int) -> float:
     """Return transactions/s a perfect master could reach on an 8E1 line."""
-    char_s = rtu.character_time_s(baudrate, 'E', 1)
-    gap_s = rtu.frame_gap_s(baudrate, 'E', 1)
-    return 1.0 / ((REQUEST_BYTES + reply_bytes) * char_s + 2 * gap_s)
+    return 1.0 / wire_time_s(LinkSettings(baudrate=baudrate, parity='E'), REQUEST_BYTES,
+                             reply_bytes)
 
 
 def start_server(baudrate: int):

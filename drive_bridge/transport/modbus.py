@@ -121,16 +121,17 @@ class ModbusTransport:
     def _make_client(self):
         settings = self.settings
         common = {'timeout': settings.timeout_s, 'retries': 0}
+        serial_extra = {}
         if _HAS_TRACE_PACKET:
             common['trace_packet'] = self._trace_packet
-        if not _HAS_TRACE_PACKET:  # pymodbus 3.6: no retry on empty, no strict char timing
+        else:  # pymodbus 3.6: no retry on empty, no strict character timing
             common.update(retry_on_empty=False, reconnect_delay=0)
+            serial_extra['strict'] = False
         if settings.is_serial:
-            extra = {} if _HAS_TRACE_PACKET else {'strict': False}
             return ModbusSerialClient(
                 port=settings.port, framer=_Framer.RTU, baudrate=settings.baudrate,
                 bytesize=8, parity=settings.parity, stopbits=settings.effective_stopbits,
-                handle_local_echo=settings.local_echo, **extra, **common)
+                handle_local_echo=settings.local_echo, **serial_extra, **common)
         framer = _Framer.SOCKET if settings.protocol == 'modbus_tcp' else _Framer.RTU
         return ModbusTcpClient(host=settings.host, port=settings.tcp_port, framer=framer,
                                **common)
