@@ -97,6 +97,14 @@ DEVICE_SETTINGS: Tuple[Setting, ...] = (
     Setting('reference_timeout', float, 0.0,
             'drives: seconds without a speed_reference message before a ramp stop; 0 = off',
             low=0.0, high=3600.0, runtime=True, drives_only=True),
+    Setting('comms_timeout', float, 0.0,
+            "drives: the drive's own control word timeout in seconds, written when the drive "
+            'comes online (FC: par. 8-03); 0 = leave the drive as set',
+            low=0.0, high=6000.0, drives_only=True),
+    Setting('comms_timeout_function', int, -1,
+            'drives: what the drive does on a control word timeout (FC: par. 8-04; 0 off, '
+            '1 freeze, 2 stop, 3 jog, 4 max speed, 5 stop and trip); -1 = leave as set',
+            choices=(-1, 0, 1, 2, 3, 4, 5), drives_only=True),
 )
 BUS_SETTING = {setting.name: setting for setting in BUS_SETTINGS}
 DEVICE_SETTING = {setting.name: setting for setting in DEVICE_SETTINGS}
@@ -114,13 +122,23 @@ class DeviceConfig:
     allow_control: bool
     stop_on_shutdown: bool
     current_scale: float
+    speed_reference: float = 0.0
+    reference_timeout: float = 0.0
+    comms_timeout: float = 0.0
+    comms_timeout_function: int = -1
+
+    @property
+    def is_drive(self) -> bool:
+        """Return whether the device takes a speed reference (FC-profile drives)."""
+        return FAMILIES[self.family].is_drive
 
     def make_spec(self) -> DeviceSpec:
         """Return the bus's view of this device, with its profile."""
-        family = FAMILIES[self.family]
-        profile = family.make_profile(self.model, self.current_scale)
+        profile = FAMILIES[self.family].make_profile(self)
+        if self.is_drive:
+            profile.set_reference(self.speed_reference)
         return DeviceSpec(self.name, self.address, profile, self.poll_rate,
-                          self.allow_control, self.stop_on_shutdown)
+                          self.allow_control, self.stop_on_shutdown, self.reference_timeout)
 
 
 @dataclass
@@ -218,13 +236,17 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
     if family_name in PLANNED_FAMILIES:
         raise ConfigError(f'parameter {name + ".family"!r} = {family_name!r} is not '
                           f'implemented in this version: allowed {", ".join(FAMILIES)}')
+    family = FAMILIES[check_value(DEVICE_SETTING['family'], family_name, f'{name}.family')]
     checked = {}
-    for setting in DEVICE_SETTINGS:
-        if setting.drives_only:
-            continue
+    for setting in device_settings(family.name):
         checked[setting.name] = check_value(
             setting, values.get(setting.name, setting.default), f'{name}.{setting.name}')
-    family = FAMILIES[checked['family']]
+    for key in values:
+        setting = DEVICE_SETTING.get(key)
+        if setting is not None and setting.drives_only and not family.is_drive and \
+                values[key] != setting.default:
+            raise ConfigError(f'parameter {name + "." + key!r} applies to drives only '
+                              f'(families {", ".join(drive_families())}), not {family.name}')
     if checked['model'] not in family.models:
         raise ConfigError(f'parameter {name + ".model"!r} = {checked["model"]!r} is invalid '
                           f'for family {family.name}: allowed {", ".join(family.models)}')
@@ -236,6 +258,17 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
         raise ConfigError(f'device {name!r} (family {family.name}) cannot run on protocol '
                           f'{protocol!r}: allowed {", ".join(family.protocols)}')
     return DeviceConfig(name=name, **checked)
+
+
+def device_settings(family: str) -> Tuple[Setting, ...]:
+    """Return the settings a device of ``family`` takes (drives have a few more)."""
+    is_drive = family in FAMILIES and FAMILIES[family].is_drive
+    return tuple(setting for setting in DEVICE_SETTINGS if is_drive or not setting.drives_only)
+
+
+def drive_families() -> List[str]:
+    """Return the names of the families that take a speed reference."""
+    return [name for name, family in FAMILIES.items() if family.is_drive]
 
 
 def _check_unique_addresses(devices: List[DeviceConfig]) -> None:

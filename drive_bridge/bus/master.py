@@ -20,7 +20,7 @@ import threading
 import time
 from typing import Callable, Deque, Dict, List, Optional
 
-from drive_bridge.devices.base import DeviceReading, ReadRegisters, WriteRegister
+from drive_bridge.devices.base import DeviceReading, PollItem
 from drive_bridge.errors import (
     BadFrame, CommandRefused, DeviceException, LinkDown, ModelMismatch, NoResponse,
     ProtocolError, TransportError)
@@ -48,6 +48,7 @@ class DeviceSpec:
     poll_rate_hz: float = 5.0
     allow_control: bool = True
     stop_on_shutdown: bool = True
+    reference_timeout_s: float = 0.0  # drives: deadman on speed_reference messages; 0 = off
 
 
 @dataclass
@@ -132,6 +133,10 @@ class _Device:
         self.reading: Optional[DeviceReading] = None
         self.started_by_bridge = False
         self.stats = DeviceStats()
+        self.reference_deadline_s = float('inf')
+        self.rejected_references = 0
+        self.deadman_stops = 0
+        self.setup_error = ''
 
     @property
     def poll_period_s(self) -> float:
@@ -144,6 +149,8 @@ class _Job:
     command: str
     transactions: tuple
     future: Future
+    decode: Optional[Callable[[list], object]] = None
+    on_acknowledged: Optional[Callable[[], None]] = None
 
 
 class BusMaster:
@@ -192,9 +199,20 @@ class BusMaster:
                 name=name, unit=device.spec.unit, family=profile.family,
                 model=getattr(profile, 'model', None) or profile.configured_model,
                 online=device.online, status_text=device.status_text,
-                reading=device.reading, stats=device.stats.as_dict(),
+                reading=device.reading, stats=self._device_stats(device),
                 started_by_bridge=device.started_by_bridge,
                 allow_control=device.spec.allow_control)
+
+    @staticmethod
+    def _device_stats(device: _Device) -> Dict[str, str]:
+        stats = device.stats.as_dict()
+        if device.setup_error:
+            stats['setup_error'] = device.setup_error
+        if hasattr(device.spec.profile, 'set_reference'):
+            stats['rejected_references'] = str(device.rejected_references)
+            stats['deadman_stops'] = str(device.deadman_stops)
+            stats['reference_timeout_s'] = f'{device.spec.reference_timeout_s:g}'
+        return stats
 
     def set_allow_control(self, name: str, allow: bool) -> None:
         """Switch a device between controlled and monitor-only."""
@@ -221,37 +239,77 @@ class BusMaster:
         try:
             with self._lock:
                 device = self._checked_device(name, command, control=True)
-                plan = device.spec.profile.command_plan(command)
-                self._enqueue(_Job(device, command, plan.writes, future))
+                profile = device.spec.profile
+                if hasattr(profile, 'check_command'):
+                    profile.check_command(command, device.reading)
+                plan = profile.command_plan(command)
+                self._enqueue(_Job(device, command, plan.writes, future,
+                                   on_acknowledged=plan.on_acknowledged))
         except CommandRefused as error:
             future.set_exception(error)
         return future
 
-    def read_parameter(self, name: str, number: int) -> Future:
-        """Queue a read of parameter ``number``; the future gives its raw value."""
-        return self._parameter_job(name, number, None)
+    def read_parameter(self, name: str, number: int, **options) -> Future:
+        """
+        Queue a read of parameter ``number``; the future gives its value.
 
-    def write_parameter(self, name: str, number: int, value: int) -> Future:
+        ``options`` go to the profile's ``parameter_plan`` (drives: data_type, conversion,
+        index).
+        """
+        return self._parameter_job(name, number, None, options)
+
+    def write_parameter(self, name: str, number: int, value, **options) -> Future:
         """Queue a write of parameter ``number``; the future resolves on acknowledgement."""
-        return self._parameter_job(name, number, value)
+        return self._parameter_job(name, number, value, options)
 
-    def _parameter_job(self, name: str, number: int, value: Optional[int]) -> Future:
+    def _parameter_job(self, name: str, number: int, value, options: dict) -> Future:
         future: Future = Future()
         try:
             with self._lock:
                 write = value is not None
                 device = self._checked_device(name, 'parameter write' if write else '',
                                               control=write)
-                address = device.spec.profile.parameter_address(number)
-                if write and not 0 <= value <= 0xFFFF:
-                    raise CommandRefused(f'value {value} does not fit a 16-bit register')
-                transaction = (WriteRegister(address, value) if write
-                               else ReadRegisters(address, 1))
-                label = f'parameter {number} {"write" if write else "read"}'
-                self._enqueue(_Job(device, label, (transaction,), future))
+                plan = device.spec.profile.parameter_plan(number, value, **options)
+                self._enqueue(_Job(device, plan.label, plan.transactions, future,
+                                   decode=plan.decode))
         except CommandRefused as error:
             future.set_exception(error)
         return future
+
+    def set_speed_reference(self, name: str, percent: float, from_topic: bool = False) -> int:
+        """
+        Set a drive's speed reference; it goes out with the next process-data write.
+
+        ``from_topic`` feeds the deadman (``reference_timeout_s``). Raises CommandRefused
+        (nothing sent) for a device without a reference or a value that is not finite or
+        outside [-200, 200) %; returns the 16-bit reference word.
+        """
+        with self._lock:
+            device = self._devices.get(name)
+            if device is None:
+                raise CommandRefused(
+                    f'unknown device {name!r}: this bus has {", ".join(self._devices)}')
+            profile = device.spec.profile
+            if not hasattr(profile, 'set_reference'):
+                raise CommandRefused(f'{name} ({profile.family}) takes no speed reference')
+            try:
+                word = profile.set_reference(percent)
+            except CommandRefused:
+                device.rejected_references += 1
+                raise
+            if from_topic:
+                device.reference_deadline_s = self.clock() + device.spec.reference_timeout_s
+            if getattr(profile, 'control_word', None) is not None:
+                device.next_due_s = self.clock()  # write it with the next cycle, now
+        self._wake.set()
+        return word
+
+    def set_reference_timeout(self, name: str, timeout_s: float) -> None:
+        """Change a drive's deadman time (0 = off)."""
+        with self._lock:
+            device = self._devices[name]
+            device.spec.reference_timeout_s = timeout_s
+            device.reference_deadline_s = self.clock() + timeout_s
 
     def _checked_device(self, name: str, command: str, control: bool) -> _Device:
         device = self._devices.get(name)
@@ -337,6 +395,7 @@ class BusMaster:
                 return self._link_retry_at_s - now
             if not self._open_link(now):
                 return self._link_retry_at_s - self.clock()
+        self._check_deadman(now)
         if self._jobs:
             self._run_job(self._jobs.popleft())
             return 0.0
@@ -348,6 +407,31 @@ class BusMaster:
             return wait_s
         self._poll(device)
         return 0.0
+
+    def _check_deadman(self, now: float) -> None:
+        """Ramp-stop a drive whose speed_reference messages stopped (reference_timeout_s)."""
+        with self._lock:
+            for device in self._devices.values():
+                if device.spec.reference_timeout_s <= 0 or now < device.reference_deadline_s \
+                        or not getattr(device.spec.profile, 'commanded_run', False) \
+                        or device.online is not True:
+                    continue
+                device.reference_deadline_s = float('inf')
+                device.deadman_stops += 1
+                plan = device.spec.profile.command_plan('stop')
+                future: Future = Future()
+                future.add_done_callback(lambda done, d=device: self._deadman_done(d, done))
+                self._enqueue(_Job(device, 'stop', plan.writes, future,
+                                   on_acknowledged=plan.on_acknowledged))
+
+    def _deadman_done(self, device: _Device, future: Future) -> None:
+        error = future.exception()
+        text = (f'reference timeout ({device.spec.reference_timeout_s:g} s without a '
+                f'speed_reference message): ramp stop '
+                + (f'failed: {error}' if error else 'sent'))
+        with self._lock:
+            device.stats.last_error = text
+        self._emit(BusEvent(device.spec.name, 'error' if error else 'notice', message=text))
 
     def _next_due_device(self) -> Optional[_Device]:
         with self._lock:
@@ -408,17 +492,32 @@ class BusMaster:
         with self._lock:
             device.next_due_s = max(device.next_due_s + device.poll_period_s, now)
         retries = self.timing.retries if device.online is not False else 0
-        blocks = []
+        profile = device.spec.profile
+        results: list = []
         try:
-            for transaction in device.spec.profile.poll_plan():
-                blocks.append(self._read_with_retries(device, transaction, retries))
+            self._run_poll_items(device, profile.poll_plan(), retries, results)
+            if hasattr(profile, 'follow_up_plan'):
+                self._run_poll_items(device, profile.follow_up_plan(results), retries, results)
         except LinkDown as error:
             self._link_lost(str(error), self.clock())
             return
         except TransportError as error:
             self._poll_failed(device, error)
             return
-        self._poll_succeeded(device, blocks)
+        self._poll_succeeded(device, results)
+
+    def _run_poll_items(self, device: _Device, items: list, retries: int,
+                        results: list) -> None:
+        """Run a poll's transactions in order, appending each result to ``results``."""
+        for item in items:
+            if not isinstance(item, PollItem):
+                item = PollItem(item)
+            try:
+                results.append(self._read_with_retries(device, item.transaction, retries))
+            except DeviceException as error:
+                if not item.optional:
+                    raise
+                results.append(error)
 
     def _read_with_retries(self, device: _Device, transaction, retries: int):
         attempt = 0
@@ -460,6 +559,8 @@ class BusMaster:
         was_offline = device.online is False
         device.online = False
         device.reading = None
+        if hasattr(device.spec.profile, 'on_offline'):
+            device.spec.profile.on_offline()  # a drive forgets its command: no keepalive
         device.status_text = reason
         device.backoff_s = self.timing.backoff_initial_s
         device.next_due_s = self.clock() + device.backoff_s
@@ -495,17 +596,38 @@ class BusMaster:
             if came_online:
                 self._emit(BusEvent(device.spec.name, 'online', reading=reading))
             self._emit(BusEvent(device.spec.name, 'reading', reading=reading))
+        if came_online:
+            self._run_setup(device)
+
+    def _run_setup(self, device: _Device) -> None:
+        """Send the set-up writes (drives: their comms timeout) each time a device is back."""
+        writes = device.spec.profile.setup_plan() if \
+            hasattr(device.spec.profile, 'setup_plan') else []
+        try:
+            for write in writes:
+                self._transact(device, write)
+        except LinkDown as error:
+            self._link_lost(str(error), self.clock())
+            return
+        except TransportError as error:
+            text = self._explain(device, error)
+            with self._lock:
+                device.setup_error = f'set-up write {write} failed: {text}'
+            self._emit(BusEvent(device.spec.name, 'error', message=device.setup_error))
+            return
+        with self._lock:
+            device.setup_error = ''
 
     def _run_job(self, job: _Job) -> None:
         device = job.device
         name = device.spec.name
-        result = None
+        results: list = []
         try:
             for transaction in job.transactions:
-                result = self._transact(device, transaction)
+                results.append(self._transact(device, transaction))
         except DeviceException as error:
-            text = device.spec.profile.explain_exception(error.code)
-            job.future.set_exception(CommandRefused(f'rejected by {name}: {text}'))
+            job.future.set_exception(CommandRefused(
+                f'rejected by {name}: {self._explain(device, error)}'))
             return
         except TransportError as error:
             self._may_have_started(device, job.command)
@@ -517,14 +639,37 @@ class BusMaster:
             return
         self._may_have_started(device, job.command)
         with self._lock:
+            if job.on_acknowledged is not None:
+                job.on_acknowledged()
             if job.command in ('stop', 'quick_stop', 'coast_stop'):
                 device.started_by_bridge = False
+            if job.command == 'start':
+                device.reference_deadline_s = self.clock() + device.spec.reference_timeout_s
             device.next_due_s = self.clock()  # read the new state at once
-        if result is not None:
-            job.future.set_result(result[0])
+        if job.decode is not None:
+            try:
+                job.future.set_result(job.decode(results))
+            except (ValueError, IndexError, TypeError) as error:
+                job.future.set_exception(ProtocolError(f'{job.command}: cannot decode the '
+                                                       f'reply: {error}'))
         else:
             job.future.set_result(
                 f'{job.command} acknowledged by {name} (address {device.spec.unit})')
+
+    def _explain(self, device: _Device, error: TransportError) -> str:
+        """Return a failure in words; a device exception with the profile's text and detail."""
+        if not isinstance(error, DeviceException):
+            return str(error)
+        profile = device.spec.profile
+        detail = None
+        detail_read = profile.detail_plan(error.code) if hasattr(profile, 'detail_plan') \
+            else None
+        if detail_read is not None:
+            try:
+                detail = self._transact(device, detail_read)[0]
+            except TransportError:
+                detail = None
+        return profile.explain_exception(error.code, detail)
 
     def _may_have_started(self, device: _Device, command: str) -> None:
         """Remember a start that was acknowledged, or may have run without a reply."""

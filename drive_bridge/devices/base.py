@@ -1,7 +1,7 @@
 """Types every device family shares: transactions it asks for and readings it returns."""
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 # The commands of the ROS contract (std_srvs/Trigger services).
 COMMANDS = ('start', 'stop', 'quick_stop', 'reset', 'coast_stop')
@@ -15,10 +15,16 @@ STATES = (
 
 @dataclass(frozen=True)
 class ReadRegisters:
-    """Read ``count`` holding registers (function 03) from frame address ``address``."""
+    """
+    Read ``count`` holding registers (function 03) from frame address ``address``.
+
+    ``exact``: the reply must carry ``count`` registers; False for text parameters, which
+    the FC series answers with fewer registers when the text is shorter (manual 004, 5.4.4).
+    """
 
     address: int
     count: int
+    exact: bool = True
 
 
 @dataclass(frozen=True)
@@ -29,7 +35,40 @@ class WriteRegister:
     value: int
 
 
-Transaction = object  # ReadRegisters | WriteRegister; later families add their own.
+@dataclass(frozen=True)
+class WriteRegisters:
+    """Write several holding registers (function 10) from frame address ``address``."""
+
+    address: int
+    values: Tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class ReadCoils:
+    """Read ``count`` coils (function 01) from coil address ``address`` (coil number - 1)."""
+
+    address: int
+    count: int
+
+
+@dataclass(frozen=True)
+class WriteCoils:
+    """Write coils (function 0F) from coil address ``address``; ``values`` one bool a coil."""
+
+    address: int
+    values: Tuple[bool, ...]
+
+
+@dataclass(frozen=True)
+class WriteCoil:
+    """Write one coil (function 05) at coil address ``address``."""
+
+    address: int
+    value: bool
+
+
+WRITES = (WriteRegister, WriteRegisters, WriteCoils, WriteCoil)
+Transaction = object  # one of the dataclasses above
 
 
 @dataclass
@@ -58,7 +97,36 @@ class DeviceReading:
 
 @dataclass(frozen=True)
 class CommandPlan:
-    """The writes that carry out one command, in order."""
+    """
+    The writes that carry out one command, in order.
+
+    ``on_acknowledged`` runs on the bus thread once every write was acknowledged: a profile
+    that keeps state (the drives' control word) commits it there, never before.
+    """
 
     command: str
     writes: Tuple[object, ...]
+    on_acknowledged: Optional[Callable[[], None]] = None
+
+
+@dataclass(frozen=True)
+class PollItem:
+    """
+    One transaction of a poll, with the key its result is decoded under.
+
+    An ``optional`` item that the device refuses (a Modbus exception) does not fail the
+    poll: its result is the :class:`~drive_bridge.errors.DeviceException` instead.
+    """
+
+    transaction: object
+    key: str = ''
+    optional: bool = False
+
+
+@dataclass(frozen=True)
+class ParameterPlan:
+    """The transactions of one parameter access and how to turn their results into a value."""
+
+    label: str
+    transactions: Tuple[object, ...]
+    decode: Callable[[list], object]

@@ -9,7 +9,8 @@ Register numbers are the manual's 1-based numbers; the frame address is number -
 from dataclasses import dataclass
 from typing import Dict, FrozenSet, List, Optional, Tuple
 
-from drive_bridge.devices.base import CommandPlan, DeviceReading, ReadRegisters, WriteRegister
+from drive_bridge.devices.base import (
+    CommandPlan, DeviceReading, ParameterPlan, ReadRegisters, WriteRegister)
 from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
 from drive_bridge.protocol.words import bit, bits
 
@@ -300,6 +301,17 @@ class McdProfile:
                 f'parameter {number} is out of range for {self.features.name}: 1-{maximum}')
         return FIRST_PARAMETER_NUMBER + number - 1 - 40001
 
-    def explain_exception(self, code: int) -> str:
+    def parameter_plan(self, number: int, value: Optional[int] = None) -> ParameterPlan:
+        """Return the read (value None) or write of parameter ``number`` (16-bit raw)."""
+        address = self.parameter_address(number)
+        if value is None:
+            return ParameterPlan(f'parameter {number} read', (ReadRegisters(address, 1),),
+                                 lambda results: results[0][0])
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFFFF:
+            raise CommandRefused(f'value {value!r} does not fit a 16-bit register')
+        return ParameterPlan(f'parameter {number} write', (WriteRegister(address, value),),
+                             lambda results: f'parameter {number} = {value} acknowledged')
+
+    def explain_exception(self, code: int, detail: Optional[int] = None) -> str:
         """Return technician text for a Modbus exception code from the module."""
         return module_error_text(code)

@@ -3,7 +3,8 @@
 from dataclasses import dataclass
 from typing import Callable, Dict, Tuple
 
-from drive_bridge.devices import mcd
+from drive_bridge.devices import fc, mcd
+from drive_bridge.devices.drive import DriveProfile
 
 
 @dataclass(frozen=True)
@@ -16,7 +17,14 @@ class Family:
     address_range: Tuple[int, int]
     protocols: Tuple[str, ...]
     is_drive: bool
-    make_profile: Callable[..., object]
+    make_profile: Callable[..., object]  # takes a validated device config
+
+
+def _drive_profile(data):
+    def make(device) -> DriveProfile:
+        return DriveProfile(data, device.model, device.current_scale, device.comms_timeout,
+                            device.comms_timeout_function)
+    return make
 
 
 FAMILIES: Dict[str, Family] = {
@@ -25,7 +33,12 @@ FAMILIES: Dict[str, Family] = {
         description='MCD 201/202/500 via the MCD Modbus Module, MCD 3000 via the Remote Operator',
         models=mcd.MODELS, address_range=mcd.ADDRESS_RANGE,
         protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'), is_drive=False,
-        make_profile=lambda model, current_scale: mcd.McdProfile(model, current_scale)),
+        make_profile=lambda device: mcd.McdProfile(device.model, device.current_scale)),
+    'fc': Family(
+        name='fc', description='VLT Micro Drive FC 51, built-in Modbus RTU',
+        models=fc.MODELS, address_range=fc.ADDRESS_RANGE,
+        protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'), is_drive=True,
+        make_profile=_drive_profile(fc.DATA)),
 }
 # Families of the ROS contract that this version does not implement yet.
-PLANNED_FAMILIES = ('vlt', 'fc', 'lvsg')
+PLANNED_FAMILIES = ('vlt', 'lvsg')

@@ -35,3 +35,42 @@ def split_u32(value: int) -> tuple:
     if not 0 <= value <= 0xFFFFFFFF:
         raise ValueError(f'{value} does not fit in an unsigned 32-bit value')
     return (value >> 16) & 0xFFFF, value & 0xFFFF
+
+
+def to_signed32(value: int) -> int:
+    """Interpret an unsigned 32-bit value as two's complement."""
+    value &= 0xFFFFFFFF
+    return value - 0x100000000 if value & 0x80000000 else value
+
+
+def words_to_coils(words: list) -> tuple:
+    """
+    Spread 16-bit words over coils, 16 a word, least significant bit first.
+
+    Coil 1 is bit 0 of the first word, so a function 0F request carries each word low
+    byte first, as the VLT option card manual's frames show (0x047C -> ``7C 04``).
+    """
+    return tuple(bool((word >> index) & 1) for word in words for index in range(16))
+
+
+def coils_to_words(coils: list) -> list:
+    """Join coils (16 a word, least significant bit first) back into 16-bit words."""
+    if len(coils) % 16:
+        raise ValueError(f'{len(coils)} coils are not a whole number of 16-bit words')
+    return [sum(1 << index for index in range(16) if coils[offset + index])
+            for offset in range(0, len(coils), 16)]
+
+
+def registers_to_text(registers: list) -> str:
+    """Decode a text parameter: two characters a register, high byte first, trailing spaces cut."""
+    raw = b''.join((register & 0xFFFF).to_bytes(2, 'big') for register in registers)
+    return raw.split(b'\x00', 1)[0].decode('latin-1').rstrip(' ')
+
+
+def text_to_registers(text: str, characters: int) -> list:
+    """Encode ``text`` space-filled to ``characters`` (even) as registers, high byte first."""
+    raw = text.encode('latin-1')
+    if len(raw) > characters:
+        raise ValueError(f'text {text!r} is longer than {characters} characters')
+    raw = raw.ljust(characters + characters % 2, b' ')
+    return [int.from_bytes(raw[index:index + 2], 'big') for index in range(0, len(raw), 2)]

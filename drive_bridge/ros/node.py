@@ -13,7 +13,7 @@ from typing import Any, Dict, List, Optional
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusEvent, BusMaster, DeviceSnapshot
-from drive_bridge.errors import ConfigError, DriveBridgeError
+from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError
 from drive_bridge.transport.modbus import ModbusTransport
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
@@ -22,13 +22,14 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Float32, String, UInt16
+from std_msgs.msg import Float32, String, UInt16, UInt32
 from std_srvs.srv import Trigger
 
 NODE_NAME = 'drive_bridge'
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
 SERVICE_COMMANDS = ('start', 'stop', 'quick_stop', 'reset')
+DRIVE_SERVICE_COMMANDS = SERVICE_COMMANDS + ('coast_stop',)
 SHUTDOWN_STOP_TIMEOUT_S = 3.0
 
 
@@ -48,7 +49,7 @@ def _descriptor(setting: cfg.Setting, label: str) -> ParameterDescriptor:
 class _DevicePublishers:
     """The publishers of one device and what was last published on latched topics."""
 
-    def __init__(self, node: Node, name: str):
+    def __init__(self, node: Node, name: str, is_drive: bool):
         self.state = node.create_publisher(String, f'{name}/state', LATCHED)
         self.trip = node.create_publisher(String, f'{name}/trip', LATCHED)
         self.status_word = node.create_publisher(UInt16, f'{name}/status_word', 10)
@@ -56,6 +57,11 @@ class _DevicePublishers:
         self.trip_code = node.create_publisher(UInt16, f'{name}/trip_code', 10)
         self.motor_temperature = node.create_publisher(
             Float32, f'{name}/motor_temperature', 10)
+        self.speed_feedback = self.alarm_word = self.warning_word = None
+        if is_drive:
+            self.speed_feedback = node.create_publisher(Float32, f'{name}/speed_feedback', 10)
+            self.alarm_word = node.create_publisher(UInt32, f'{name}/alarm_word', 10)
+            self.warning_word = node.create_publisher(UInt32, f'{name}/warning_word', 10)
         self.last_state: Optional[str] = None
         self.last_trip: Optional[str] = None
 
@@ -86,7 +92,7 @@ class DriveBridgeNode(Node):
         self._guard = self.create_guard_condition(self._publish_events)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         for device in self.config.devices:
-            self._create_device_interface(device.name)
+            self._create_device_interface(device.name, device.is_drive)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(self.config.diagnostics_period_s, self._publish_diagnostics,
                           callback_group=self._timer_group)
@@ -107,9 +113,11 @@ class DriveBridgeNode(Node):
         for name in names:
             if not isinstance(name, str) or not cfg.DEVICE_NAME.match(name):
                 continue
+            family = self._declare(cfg.DEVICE_SETTING['family'], f'{name}.family')
             device_values[name] = {
                 setting.name: self._declare(setting, f'{name}.{setting.name}')
-                for setting in cfg.DEVICE_SETTINGS if not setting.drives_only}
+                for setting in cfg.device_settings(family) if setting.name != 'family'}
+            device_values[name]['family'] = family
         self._check_unknown_overrides(names)
         return cfg.build_config(bus_values, device_values)
 
@@ -126,7 +134,8 @@ class DriveBridgeNode(Node):
             device, _, setting = key.partition('.')
             if device in names and setting in cfg.DEVICE_SETTING and \
                     cfg.DEVICE_SETTING[setting].drives_only:
-                raise ConfigError(f'parameter {key!r} applies to drives only')
+                raise ConfigError(f'parameter {key!r} applies to drives only (families '
+                                  f'{", ".join(cfg.drive_families())})')
             known = ', '.join(s.name for s in cfg.DEVICE_SETTINGS) if device in names \
                 else ', '.join(s.name for s in cfg.BUS_SETTINGS)
             raise ConfigError(f'unknown parameter {key!r} in the parameters: known are '
@@ -142,7 +151,14 @@ class DriveBridgeNode(Node):
                 value = cfg.check_value(setting, parameter.value, parameter.name)
             except ConfigError as error:
                 return SetParametersResult(successful=False, reason=str(error))
-            if setting_name == 'allow_control':
+            if setting_name == 'speed_reference':
+                try:
+                    self.bus.set_speed_reference(device, value)
+                except CommandRefused as error:
+                    return SetParametersResult(successful=False, reason=str(error))
+            elif setting_name == 'reference_timeout':
+                self.bus.set_reference_timeout(device, value)
+            elif setting_name == 'allow_control':
                 self.bus.set_allow_control(device, value)
             elif setting_name == 'poll_rate':
                 self.bus.set_poll_rate(device, value)
@@ -151,11 +167,16 @@ class DriveBridgeNode(Node):
         return SetParametersResult(successful=True)
 
     # -- interface ----------------------------------------------------------------------
-    def _create_device_interface(self, name: str) -> None:
-        publishers = _DevicePublishers(self, name)
+    def _create_device_interface(self, name: str, is_drive: bool) -> None:
+        publishers = _DevicePublishers(self, name, is_drive)
         publishers.publish_state('unknown')
         self._device_publishers[name] = publishers
-        for command in SERVICE_COMMANDS:
+        if is_drive:
+            self.create_subscription(
+                Float32, f'{name}/speed_reference',
+                lambda message, n=name: self._on_speed_reference(n, message), 10,
+                callback_group=self._timer_group)
+        for command in DRIVE_SERVICE_COMMANDS if is_drive else SERVICE_COMMANDS:
             self.create_service(
                 Trigger, f'{name}/{command}',
                 lambda request, response, c=command, n=name: self._on_trigger(n, c, response),
@@ -180,6 +201,16 @@ class DriveBridgeNode(Node):
         else:
             self.get_logger().warning(f'{name}/{command}: {response.message}')
         return response
+
+    def _on_speed_reference(self, name: str, message: Float32) -> None:
+        try:
+            self.bus.set_speed_reference(name, message.data, from_topic=True)
+        except CommandRefused as error:
+            self.get_logger().warning(f'{name}/speed_reference: {error}',
+                                      throttle_duration_sec=1.0)
+        except Exception as error:  # noqa: B902 - a bug must not kill the node
+            self.get_logger().error(f'{name}/speed_reference: internal error '
+                                    f'{type(error).__name__}: {error}')
 
     # -- bus events (bus thread -> executor) --------------------------------------------
     def _on_bus_event(self, event: BusEvent) -> None:
@@ -206,6 +237,8 @@ class DriveBridgeNode(Node):
         elif event.kind == 'error':
             publishers.publish_state('unknown')
             self.get_logger().error(f'{event.device}: {event.message}')
+        elif event.kind == 'notice':
+            self.get_logger().warning(f'{event.device}: {event.message}')
         elif event.kind == 'online':
             self.get_logger().info(f'{event.device} online')
         elif event.kind == 'reading' and event.reading is not None:
@@ -220,6 +253,12 @@ class DriveBridgeNode(Node):
         if reading.motor_temperature_pct is not None:
             publishers.motor_temperature.publish(
                 Float32(data=float(reading.motor_temperature_pct)))
+        if publishers.speed_feedback is not None and reading.speed_feedback_pct is not None:
+            publishers.speed_feedback.publish(Float32(data=float(reading.speed_feedback_pct)))
+        if publishers.alarm_word is not None and reading.alarm_word is not None:
+            publishers.alarm_word.publish(UInt32(data=int(reading.alarm_word)))
+        if publishers.warning_word is not None and reading.warning_word is not None:
+            publishers.warning_word.publish(UInt32(data=int(reading.warning_word)))
         publishers.publish_trip(reading.trip_name)
         publishers.publish_state(reading.state)
 
@@ -278,6 +317,11 @@ def _reading_values(reading) -> Dict[str, str]:
         values['motor_current_a'] = f'{reading.motor_current_a:.1f}'
     if reading.motor_temperature_pct is not None:
         values['motor_temperature_pct'] = f'{reading.motor_temperature_pct:.0f}'
+    if reading.speed_feedback_pct is not None:
+        values['speed_feedback_pct'] = f'{reading.speed_feedback_pct:.2f}'
+    for key in ('alarm_word', 'warning_word'):
+        if getattr(reading, key) is not None:
+            values[key] = f'0x{getattr(reading, key):08X}'
     values.update(reading.details)
     return values
 

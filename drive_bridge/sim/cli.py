@@ -5,9 +5,11 @@ Examples::
 
     drive_bridge_sim --device mcd500:20 --link /tmp/ttyMCD     # RTU on a pty, 8N2
     drive_bridge_sim --device mcd500:20 --device mcd202:21 --tcp 5020 --framing rtu
+    drive_bridge_sim --device fc51:1 --device mcd500:20 --link /tmp/ttyLINE
 
 With ``--console`` (default when standard input is a terminal) it reads commands:
-``trip ADDR CODE``, ``hand ADDR on|off``, ``silent ADDR on|off``, ``status``, ``quit``.
+``trip ADDR CODE`` (MCD trip code; FC: alarm word bit, 5 = over current), ``hand ADDR
+on|off`` (MCD Hand On; FC local operation), ``silent ADDR on|off``, ``status``, ``quit``.
 """
 
 import argparse
@@ -18,11 +20,9 @@ import time
 from typing import Dict, List, Optional
 
 from drive_bridge.devices import mcd
-from drive_bridge.sim.mcd_device import McdSimDevice
-from drive_bridge.sim.mcd_model import McdModel, McdSimConfig
+from drive_bridge.sim.devices import make_device, SIM_MODELS
+from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
-
-SIM_MODELS = tuple(mcd.MODEL_FEATURES)
 
 
 def parse_device(text: str) -> tuple:
@@ -55,13 +55,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--wire-baud', type=int, default=0,
                         help='hold replies back to the wire time at this baud rate')
     parser.add_argument('--wire-parity', choices=('N', 'E', 'O'), default='E')
-    parser.add_argument('--start-time', type=float, default=3.0, help='soft start, seconds')
-    parser.add_argument('--stop-time', type=float, default=2.0, help='soft stop, seconds')
-    parser.add_argument('--flc', type=float, default=100.0, help='motor FLC, amperes')
+    parser.add_argument('--start-time', type=float, default=3.0, help='MCD soft start, s')
+    parser.add_argument('--stop-time', type=float, default=2.0, help='MCD soft stop, s')
+    parser.add_argument('--flc', type=float, default=100.0, help='MCD motor FLC, amperes')
+    parser.add_argument('--ramp-up', type=float, default=3.0, help='FC par. 3-41, seconds')
+    parser.add_argument('--ramp-down', type=float, default=3.0, help='FC par. 3-42, seconds')
     parser.add_argument('--hand-on', type=int, action='append', default=[], metavar='ADDR',
-                        help='start this device in Hand On mode (network start/stop refused)')
+                        help='start this device in Hand On mode (MCD) or local operation (FC)')
     parser.add_argument('--trip', action='append', default=[], metavar='ADDR:CODE',
-                        help='start this device tripped with this trip code')
+                        help='start this device tripped: MCD trip code, FC alarm word bit')
     parser.add_argument('--console', action='store_true', default=None,
                         help='read commands from standard input')
     return parser
@@ -70,15 +72,18 @@ def build_parser() -> argparse.ArgumentParser:
 def build_server(args: argparse.Namespace) -> ModbusSimServer:
     """Create the devices and the server from parsed arguments."""
     now = time.monotonic()
-    devices: Dict[int, McdSimDevice] = {}
+    settings = {
+        'mcd': {'start_time_s': args.start_time, 'stop_time_s': args.stop_time,
+                'motor_flc_a': args.flc},
+        'fc': {'ramp_up_s': args.ramp_up, 'ramp_down_s': args.ramp_down},
+    }
+    devices: Dict[int, object] = {}
     for model, unit in args.device:
         if unit in devices:
             raise SystemExit(f'drive_bridge_sim: address {unit} is used twice')
-        config = McdSimConfig(model=model, start_time_s=args.start_time,
-                              stop_time_s=args.stop_time, motor_flc_a=args.flc)
-        devices[unit] = McdSimDevice(McdModel(config, now))
+        devices[unit] = make_device(model, now, **settings[SIM_MODELS[model][0]])
     for unit in args.hand_on:
-        _device(devices, unit).model.hand_on = True
+        _set_hand(_device(devices, unit), True)
     for text in args.trip:
         unit, _, code = text.partition(':')
         _device(devices, int(unit)).model.trip(int(code), now)
@@ -87,7 +92,14 @@ def build_server(args: argparse.Namespace) -> ModbusSimServer:
     return ModbusSimServer(devices, wire=wire)
 
 
-def _device(devices: Dict[int, McdSimDevice], unit: int) -> McdSimDevice:
+def _set_hand(device, on: bool) -> None:
+    if isinstance(device, FcSimDevice):
+        device.model.local_mode = on
+    else:
+        device.model.hand_on = on
+
+
+def _device(devices: Dict[int, object], unit: int):
     if unit not in devices:
         raise SystemExit(f'drive_bridge_sim: no device at address {unit}')
     return devices[unit]
@@ -117,7 +129,7 @@ def _console(server: ModbusSimServer, words: List[str]) -> str:
         if command == 'trip':
             device.model.trip(int(words[2]), now)
         elif command == 'hand':
-            device.model.hand_on = words[2] == 'on'
+            _set_hand(device, words[2] == 'on')
         elif command == 'silent':
             (server.silent_units.add if words[2] == 'on' else server.silent_units.discard)(unit)
         else:
@@ -125,9 +137,14 @@ def _console(server: ModbusSimServer, words: List[str]) -> str:
         return _describe(unit, device, now)
 
 
-def _describe(unit: int, device: McdSimDevice, now: float) -> str:
+def _describe(unit: int, device, now: float) -> str:
     model = device.model
     model.advance(now)
+    if isinstance(device, FcSimDevice):
+        return (f'{unit}: {model.config.model} output {model.output_pct:.1f} % current '
+                f'{model.motor_current_a():.2f} A control word 0x{model.control_word:04X} '
+                f'reference 0x{model.reference_word:04X} alarm word 0x{model.alarm_word:08X} '
+                f'local {model.local_mode}')
     state = mcd.STATE_CODES.get(model.state, '?')
     return (f'{unit}: {model.config.model} {state} current {model.motor_current_a:.1f} A '
             f'temperature {model.temperature_pct:.0f} % trip {model.trip_code} '

@@ -14,7 +14,8 @@ import logging
 import os
 from typing import List, Optional
 
-from drive_bridge.devices.base import ReadRegisters, WriteRegister
+from drive_bridge.devices.base import (
+    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
 from drive_bridge.protocol import rtu
 import pymodbus
@@ -151,28 +152,16 @@ class ModbusTransport:
         return data
 
     # -- transactions -------------------------------------------------------------------
-    def execute(self, unit: int, transaction) -> Optional[List[int]]:
-        """Run one transaction with device ``unit``; return registers read, or None."""
+    def execute(self, unit: int, transaction) -> Optional[list]:
+        """Run one transaction with device ``unit``; return registers or coils read, or None."""
         if self._client is None:
             raise LinkDown('bus offline: not connected')
+        handler = self._HANDLERS.get(type(transaction))
+        if handler is None:
+            raise TypeError(f'unsupported transaction {transaction!r}')
         self._received.clear()
-        keyword = {_UNIT_KEYWORD: unit}
         try:
-            if isinstance(transaction, ReadRegisters):
-                response = self._client.read_holding_registers(
-                    transaction.address, count=transaction.count, **keyword)
-                self._check(response)
-                registers = list(response.registers)
-                if len(registers) != transaction.count:
-                    raise BadFrame(f'expected {transaction.count} registers, '
-                                   f'got {len(registers)}')
-                return registers
-            if isinstance(transaction, WriteRegister):
-                response = self._client.write_register(
-                    transaction.address, transaction.value, **keyword)
-                self._check(response)
-                self._check_echo(response, transaction)
-                return None
+            return handler(self, {_UNIT_KEYWORD: unit}, transaction)
         except ConnectionException as error:
             self.close()
             raise LinkDown(f'bus offline: {self.settings.describe()}: {error}') from error
@@ -181,7 +170,54 @@ class ModbusTransport:
         except (OSError, ValueError) as error:
             self.close()
             raise LinkDown(f'bus offline: {self.settings.describe()}: {error}') from error
-        raise TypeError(f'unsupported transaction {transaction!r}')
+
+    def _read_registers(self, keyword: dict, transaction: ReadRegisters) -> List[int]:
+        response = self._client.read_holding_registers(
+            transaction.address, count=transaction.count, **keyword)
+        self._check(response)
+        registers = list(response.registers)
+        if len(registers) != transaction.count and \
+                (transaction.exact or not 0 < len(registers) <= transaction.count):
+            raise BadFrame(f'expected {transaction.count} registers, got {len(registers)}')
+        return registers
+
+    def _read_coils(self, keyword: dict, transaction: ReadCoils) -> List[bool]:
+        response = self._client.read_coils(transaction.address, count=transaction.count,
+                                           **keyword)
+        self._check(response)
+        coils = list(response.bits)
+        if len(coils) < transaction.count:
+            raise BadFrame(f'expected {transaction.count} coils, got {len(coils)}')
+        return coils[:transaction.count]
+
+    def _write_register(self, keyword: dict, transaction: WriteRegister) -> None:
+        response = self._client.write_register(transaction.address, transaction.value,
+                                               **keyword)
+        self._check(response)
+        self._check_echo(response, transaction.address, transaction.value)
+
+    def _write_coil(self, keyword: dict, transaction: WriteCoil) -> None:
+        response = self._client.write_coil(transaction.address, transaction.value, **keyword)
+        self._check(response)
+        self._check_echo(response, transaction.address, transaction.value)
+
+    def _write_registers(self, keyword: dict, transaction: WriteRegisters) -> None:
+        response = self._client.write_registers(transaction.address,
+                                                list(transaction.values), **keyword)
+        self._check(response)
+        self._check_count(response, transaction.address, len(transaction.values))
+
+    def _write_coils(self, keyword: dict, transaction: WriteCoils) -> None:
+        response = self._client.write_coils(transaction.address, list(transaction.values),
+                                            **keyword)
+        self._check(response)
+        self._check_count(response, transaction.address, len(transaction.values))
+
+    _HANDLERS = {
+        ReadRegisters: _read_registers, ReadCoils: _read_coils,
+        WriteRegister: _write_register, WriteCoil: _write_coil,
+        WriteRegisters: _write_registers, WriteCoils: _write_coils,
+    }
 
     def _check(self, response) -> None:
         if isinstance(response, ModbusIOException):  # pymodbus 3.6 returns these
@@ -197,14 +233,25 @@ class ModbusTransport:
         raise DeviceException(code)
 
     @staticmethod
-    def _check_echo(response, request: WriteRegister) -> None:
-        value = getattr(response, 'value', None)
-        if value is None:
-            registers = getattr(response, 'registers', None) or [None]
-            value = registers[0]
-        if response.address != request.address or value != request.value:
-            raise BadFrame(f'write echo {response.address}={value} does not match '
-                           f'{request.address}={request.value}')
+    def _check_echo(response, address: int, expected) -> None:
+        """Check a function 05/06 echo: same address and value as the request."""
+        echoed = getattr(response, 'value', None)
+        if echoed is None:
+            echoed = (getattr(response, 'registers', None) or getattr(response, 'bits', None)
+                      or [None])[0]
+        if isinstance(expected, bool):
+            echoed = bool(echoed)
+        if response.address != address or echoed != expected:
+            raise BadFrame(f'write echo {response.address}={echoed} does not match '
+                           f'{address}={expected}')
+
+    @staticmethod
+    def _check_count(response, address: int, count: int) -> None:
+        """Check a function 0F/10 reply: same start address and quantity as the request."""
+        echoed = getattr(response, 'count', None)
+        if response.address != address or (echoed is not None and echoed != count):
+            raise BadFrame(f'write reply {response.address}/{echoed} does not match '
+                           f'{address}/{count}')
 
     def _classify_io_error(self, text: str):
         if self.settings.is_serial and not self.settings.port.startswith('socket://') \

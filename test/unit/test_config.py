@@ -37,7 +37,7 @@ def test_int_is_accepted_for_a_double():
 
 @pytest.mark.parametrize('bus, device, message', [
     ({}, {'family': 'abc'}, "parameter 'starter.family' = 'abc' is invalid: allowed mcd"),
-    ({}, {'family': 'fc'}, "'starter.family' = 'fc' is not implemented in this version"),
+    ({}, {'family': 'vlt'}, "'starter.family' = 'vlt' is not implemented in this version"),
     ({}, {'model': 'mcd999'},
      "'starter.model' = 'mcd999' is invalid for family mcd: allowed auto, mcd201"),
     ({}, {'address': 150}, "'starter.address' = 150 is out of range for family mcd: allowed 1-99"),

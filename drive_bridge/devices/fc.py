@@ -1,0 +1,159 @@
+"""
+VLT Micro Drive FC 51 over its built-in Modbus RTU (family ``fc``).
+
+Tables from the FC 51 manual ``004_59cc2fa01c5c97de.txt`` (chapter 5, section 7.1.1) and
+``shared/research/protocols.md`` (parameter types, alarm numbers), each with its source.
+Other FC-series drives share this map; a new model is a new entry in ``MODELS``/``READOUTS``.
+"""
+
+from typing import Dict, Optional, Tuple
+
+from drive_bridge.devices.drive import DriveFamilyData
+from drive_bridge.devices.parameters import FC_CONVERSION_FACTORS, ParameterSpec, TEXT
+
+FAMILY = 'fc'
+MODELS = ('auto', 'fc51')
+ADDRESS_RANGE = (1, 247)  # manual 004 section 5.2.4; par. 8-31 sets it
+
+# Coils (manual 004 section 5.2.8, coil table): number - 1 = coil address.
+COIL_CONTROL = 0  # coils 1-16 control word, 17-32 reference: one 0F write of 32 coils
+COIL_STATUS = 32  # coils 33-48 status word, 49-64 main actual value: one 01 read of 32
+COIL_EEPROM = 64  # coil 65: 1 = parameter writes go to RAM and EEPROM
+# Holding registers (section 5.2.8, table 5.1): register number - 1.
+REGISTER_LAST_ERROR = 6  # register 7: detail of the last exception 04
+REGISTER_INDEX = 8  # register 9: array index of indexed parameters
+
+
+def _p(number: int, name: str, data_type: str, conversion: int, status: str) -> ParameterSpec:
+    return ParameterSpec(number, name, data_type, conversion,
+                         source=f'protocols.md "FC-series parameters" ({status})')
+
+
+# Parameters the bridge reads or writes (PNU without the dash: 16-14 -> 1614).
+PARAMETERS: Dict[int, ParameterSpec] = {spec.number: spec for spec in (
+    _p(803, 'control word timeout time [s]', 'uint32', -1, 'inferred from FC 102/300'),
+    _p(804, 'control word timeout function', 'uint8', 0, 'inferred from FC 102/300'),
+    _p(1500, 'operating hours [h]', 'uint32', 74, 'confirmed'),
+    _p(1501, 'running hours [h]', 'uint32', 74, 'confirmed'),
+    ParameterSpec(1540, 'FC type', TEXT, 0, 'protocols.md (confirmed)', characters=20),
+    ParameterSpec(1543, 'software version', TEXT, 0, 'protocols.md (confirmed)',
+                  characters=20),
+    _p(1600, 'control word', 'uint16', 0, 'confirmed'),
+    _p(1602, 'reference [%]', 'int16', -1, 'confirmed'),
+    _p(1603, 'status word', 'uint16', 0, 'inferred'),
+    _p(1612, 'motor voltage [V]', 'uint16', -1, 'inferred'),
+    _p(1613, 'frequency [Hz]', 'uint16', -1, 'inferred'),
+    _p(1614, 'motor current [A]', 'int32', -2, 'confirmed'),
+    _p(1618, 'motor thermal [%]', 'uint8', 0, 'inferred'),
+    _p(1630, 'DC link voltage [V]', 'uint16', 0, 'inferred'),
+    _p(1690, 'alarm word', 'uint32', 0, 'inferred'),
+    _p(1692, 'warning word', 'uint32', 0, 'open'),
+    _p(1694, 'extended status word', 'uint32', 0, 'open'),
+    ParameterSpec(3, 'regional settings', 'uint8', 0, 'manual 004 example 5.5.5 (PNU 3)'),
+    _p(124, 'motor current [A]', 'uint32', -2, 'inferred; manual 004 section 6.2.1'),
+    _p(381, 'quick stop ramp time [s]', 'uint32', -2, 'inferred'),
+    ParameterSpec(341, 'ramp 1 ramp-up time [s]', 'uint32', -2, 'manual 004 par. 3-41'),
+    ParameterSpec(342, 'ramp 1 ramp-down time [s]', 'uint32', -2,
+                  'manual 004 par. 3-42, example 5.5.4'),
+    ParameterSpec(734, 'process PI integral time [s]', 'uint32', -2,
+                  'manual 004 example 5.5.6 (65535 = 655.35 s)'),
+)}
+
+# What the bridge polls, per model (the names are the DeviceReading fields they fill).
+READOUTS: Dict[str, Dict[str, int]] = {
+    'fc51': {'motor_current': 1614, 'frequency': 1613, 'motor_thermal': 1618,
+             'alarm_word': 1690, 'warning_word': 1692, 'extended_status': 1694},
+}
+
+# Manual 004 section 7.1.1 "Alarm, Warning and Extended Status Word", par. 16-90 column:
+# bit -> (the LCP alarm number, name). Alarm numbers from protocols.md (inferred from FC 300
+# material, a table to correct); bits without a known number report 1000 + bit.
+ALARM_BITS: Dict[int, Tuple[int, str]] = {
+    0: (28, 'Brake check'),
+    1: (69, 'Power card temperature'),
+    2: (14, 'Earth fault'),
+    4: (17, 'Control word timeout'),
+    5: (13, 'Over current'),
+    7: (11, 'Motor thermistor over temperature'),
+    8: (10, 'Motor ETR over temperature'),
+    9: (9, 'Inverter overload'),
+    10: (8, 'DC under voltage'),
+    11: (7, 'DC over voltage'),
+    12: (16, 'Short circuit'),
+    14: (4, 'Mains phase loss'),
+    15: (1015, 'AMT not OK'),
+    16: (2, 'Live zero error'),
+    17: (38, 'Internal fault'),
+    19: (30, 'U phase loss'),
+    20: (31, 'V phase loss'),
+    21: (32, 'W phase loss'),
+    23: (1023, 'Control voltage fault'),
+    26: (1026, 'Brake resistor short circuit'),
+    27: (1027, 'Brake IGBT short circuit'),
+    29: (1029, 'Drive initialised'),
+    31: (1031, 'Mechanical brake low'),
+}
+# Same table, par. 16-92 column.
+WARNING_BITS: Dict[int, str] = {
+    1: 'Power card temperature', 4: 'Control word timeout', 5: 'Over current',
+    6: 'Torque limit', 7: 'Motor thermistor over temperature',
+    8: 'Motor ETR over temperature', 9: 'Inverter overload', 10: 'DC under voltage',
+    11: 'DC over voltage', 14: 'Mains phase loss', 16: 'Live zero error',
+    25: 'Current limit', 28: 'Motor phase missing', 30: 'Undefined',
+}
+# Same table, par. 16-94 column.
+EXTENDED_STATUS_BITS: Dict[int, str] = {
+    0: 'Ramping', 2: 'Start CW/CCW', 3: 'Slow down', 4: 'Catch up',
+    7: 'Output current high', 8: 'Output current low', 13: 'Braking', 15: 'OVC active',
+    16: 'AC brake', 31: 'Database busy',
+}
+
+# Manual 004 section 5.3.2: Modbus exception codes, and the detail in register 7 after 04.
+EXCEPTIONS: Dict[int, str] = {
+    1: 'illegal function (the drive does not support this function code)',
+    2: 'illegal data address (no such register or coil, or the length runs past its end)',
+    3: 'illegal data value (malformed request)',
+    4: 'slave device failure (the drive could not carry out the request)',
+}
+LAST_ERROR_DETAILS: Dict[int, str] = {
+    0: 'the parameter number does not exist',
+    1: 'there is no write access to the parameter',
+    2: 'the data value exceeds the parameter limits',
+    3: 'the sub-index in use does not exist',
+    5: 'the data type does not match the parameter called',
+    17: 'data change in the parameter is not possible in the present mode '
+        '(stop the motor first)',
+    18: 'other error',
+    130: 'there is no bus access to the parameter called',
+}
+
+
+def explain_exception(code: int, detail: Optional[int] = None) -> str:
+    """Return technician text for a Modbus exception, with register 7's detail if read."""
+    text = EXCEPTIONS.get(code, 'exception code not in the FC 51 manual')
+    if detail is not None:
+        text = f'{LAST_ERROR_DETAILS.get(detail, "unknown detail")} (register 7 = {detail}); ' \
+               f'{text}'
+    return f'{text}, Modbus exception {code:02d}'
+
+
+def parameter_label(number: int) -> str:
+    """Return a PNU as the FC manuals write it: 1614 -> '16-14', 3 -> '0-03'."""
+    return f'{number // 100}-{number % 100:02d}'
+
+
+def model_from_type(type_text: str) -> Optional[str]:
+    """Return the model that par. 15-40 FC type names ("FC-051P..." on an FC 51), or None."""
+    compact = type_text.upper().replace(' ', '').replace('-', '')
+    return 'fc51' if compact.startswith(('FC051', 'FC51')) else None
+
+
+DATA = DriveFamilyData(
+    name=FAMILY, models=MODELS, parameters=PARAMETERS, readouts=READOUTS,
+    conversion_factors=FC_CONVERSION_FACTORS, alarm_bits=ALARM_BITS,
+    warning_bits=WARNING_BITS, extended_status_bits=EXTENDED_STATUS_BITS,
+    explain_exception=explain_exception, detail_register=REGISTER_LAST_ERROR,
+    index_register=REGISTER_INDEX, eeprom_coil=COIL_EEPROM,
+    identify_parameter=1540, version_parameter=1543, model_from_type=model_from_type,
+    timeout_time_parameter=803, timeout_function_parameter=804,
+    parameter_label=parameter_label)

@@ -1,0 +1,273 @@
+"""
+Behaviour model of an FC-profile drive (VLT Micro Drive FC 51), with explicit time. Pure.
+
+It follows the FC control profile of manual 004 section 5.6: the control word is obeyed only
+with bit 10 (data valid) set and only under bus control (status word bit 9); the output
+ramps towards the bus reference per par. 3-41/3-42 (quick stop: 3-81); coasting drops the
+output at once; reset acts on the rising edge of bit 7. The control word timeout (par.
+8-03/8-04) stops or trips the drive when the master stops writing. Alarms are injectable.
+"""
+
+from dataclasses import dataclass, field
+import math
+from typing import Dict, Optional
+
+from drive_bridge.devices import fc
+from drive_bridge.devices.parameters import DATA_TYPES, TEXT
+from drive_bridge.protocol import fc_control as ctl, fc_scaling
+from drive_bridge.protocol.words import join_u32, text_to_registers
+
+# Alarm word bits (manual 004 section 7.1.1).
+ALARM_CONTROL_WORD_TIMEOUT = 4
+ALARM_OVER_CURRENT = 5
+# Par. 8-04 control word timeout functions (protocols.md, FC 102 list).
+TIMEOUT_OFF, TIMEOUT_FREEZE, TIMEOUT_STOP, TIMEOUT_JOG, TIMEOUT_MAX, TIMEOUT_TRIP = range(6)
+# Detail codes of register 7 (manual 004 section 5.3.2).
+NO_SUCH_PARAMETER, NO_WRITE_ACCESS, VALUE_OUT_OF_LIMITS = 0, 1, 2
+TYPE_MISMATCH, NOT_IN_THIS_MODE = 5, 17
+
+
+class ParameterError(Exception):
+    """A parameter access fails: exception 04 with ``detail`` in register 7."""
+
+    def __init__(self, detail: int):
+        super().__init__(fc.LAST_ERROR_DETAILS.get(detail, str(detail)))
+        self.detail = detail
+
+
+@dataclass
+class FcSimConfig:
+    """Settings of one simulated drive; times in seconds, currents in amperes."""
+
+    model: str = 'fc51'
+    type_text: str = 'FC-051PK75T4E20H3BXCXXXSXXXX'
+    software_version: str = '2.70'
+    motor_frequency_hz: float = 50.0  # par. 1-23, = 100 % reference
+    motor_current_a: float = 2.0  # par. 1-24
+    no_load_current_pct: float = 30.0
+    load_pct: float = 60.0  # load torque, % of nominal
+    ramp_up_s: float = 3.0  # par. 3-41
+    ramp_down_s: float = 3.0  # par. 3-42
+    quick_stop_ramp_s: float = 0.5  # par. 3-81
+    ctw_timeout_s: float = 1.0  # par. 8-03
+    ctw_timeout_function: int = TIMEOUT_OFF  # par. 8-04
+    thermal_time_constant_s: float = 120.0
+    extra_parameters: Dict[int, int] = field(default_factory=dict)
+
+
+class FcModel:
+    """One FC 51 and its built-in Modbus RTU interface."""
+
+    def __init__(self, config: Optional[FcSimConfig] = None, now_s: float = 0.0):
+        self.config = config or FcSimConfig()
+        self.now_s = now_s
+        self.control_word = 0  # last control word received (0 = not yet)
+        self.reference_word = 0
+        self.output_pct = 0.0  # signed, % of motor frequency
+        self.alarm_word = 0
+        self.trip_locked = False
+        self.local_mode = False
+        self.temperature_pct = 0.0
+        self.eeprom_writes = False
+        self.last_control_write_s: Optional[float] = None
+        self.timeout_active = False
+        self.last_error = 0
+        self.index = 0
+        self.control_words_received = []
+        self.parameters: Dict[int, int] = {
+            341: round(self.config.ramp_up_s * 100), 342: round(self.config.ramp_down_s * 100),
+            381: round(self.config.quick_stop_ramp_s * 100),
+            124: round(self.config.motor_current_a * 100),
+            803: round(self.config.ctw_timeout_s * 10), 804: self.config.ctw_timeout_function,
+            734: 0, 3: 0,
+        }
+        self.parameters.update(self.config.extra_parameters)
+
+    # -- time ---------------------------------------------------------------------------
+    @property
+    def tripped(self) -> bool:
+        """Return whether an alarm holds the drive tripped."""
+        return self.alarm_word != 0
+
+    def run_requested(self) -> bool:
+        """Return whether the last control word asks to run and the drive may."""
+        return (not self.tripped and not self.local_mode
+                and ctl.is_start(self.control_word))
+
+    def target_pct(self) -> float:
+        """Return where the output is heading: the reference while running, else 0."""
+        if self.timeout_active and self.parameters[804] == TIMEOUT_FREEZE:
+            return self.output_pct
+        if self.timeout_active and self.parameters[804] == TIMEOUT_MAX:
+            return 100.0
+        if not self.run_requested() or self._stop_by_timeout():
+            return 0.0
+        return fc_scaling.word_to_percent(self.reference_word)
+
+    def _stop_by_timeout(self) -> bool:
+        return self.timeout_active and self.parameters[804] in (TIMEOUT_STOP, TIMEOUT_TRIP)
+
+    def advance(self, now_s: float) -> None:
+        """Advance ramps, control word timeout, current and temperature to ``now_s``."""
+        dt = max(0.0, now_s - self.now_s)
+        self.now_s = now_s
+        self._check_timeout(now_s)
+        coast = self._data_valid() and not self.control_word & (1 << ctl.CTW_COAST_OFF)
+        if self.tripped or coast:
+            self.output_pct = 0.0  # the output is switched off at once: the motor coasts
+        else:
+            self._ramp(dt)
+        self._heat(dt)
+
+    def _data_valid(self) -> bool:
+        return bool(self.control_word & (1 << ctl.CTW_DATA_VALID))
+
+    def _ramp(self, dt: float) -> None:
+        target = self.target_pct()
+        quick = self._data_valid() and not self.control_word & (1 << ctl.CTW_QUICK_STOP_OFF)
+        speeding_up = abs(target) > abs(self.output_pct) and target * self.output_pct >= 0
+        ramp_s = self.parameters[381 if quick else 341 if speeding_up else 342] / 100.0
+        step = 100.0 * dt / max(ramp_s, 0.01)
+        if abs(target - self.output_pct) <= step:
+            self.output_pct = target
+        else:
+            self.output_pct += math.copysign(step, target - self.output_pct)
+
+    def _check_timeout(self, now_s: float) -> None:
+        function = self.parameters[804]
+        timeout_s = self.parameters[803] / 10.0
+        if function == TIMEOUT_OFF or self.last_control_write_s is None or \
+                now_s - self.last_control_write_s < timeout_s:
+            return
+        if not self.timeout_active:
+            self.timeout_active = True
+            if function == TIMEOUT_TRIP:
+                self.trip(ALARM_CONTROL_WORD_TIMEOUT, now_s)
+
+    def _heat(self, dt: float) -> None:
+        if dt <= 0:
+            return
+        ratio = self.motor_current_a() / self.config.motor_current_a
+        alpha = 1.0 - math.exp(-dt / self.config.thermal_time_constant_s)
+        self.temperature_pct += (100.0 * ratio * ratio - self.temperature_pct) * alpha
+
+    def motor_current_a(self) -> float:
+        """Return the motor current: magnetising part plus load, only while the output runs."""
+        if self.output_pct == 0.0:
+            return 0.0
+        config = self.config
+        load = config.no_load_current_pct + (100.0 - config.no_load_current_pct) * \
+            config.load_pct / 100.0 * min(1.0, abs(self.output_pct) / 100.0)
+        ramping = 15.0 if self.output_pct != self.target_pct() else 0.0
+        return config.motor_current_a * (load + ramping) / 100.0
+
+    # -- faults -------------------------------------------------------------------------
+    def trip(self, alarm_bit: int, now_s: float, locked: bool = False) -> None:
+        """Raise the alarm of ``alarm_bit`` (16-90 bit): the drive trips and coasts."""
+        self.now_s = max(self.now_s, now_s)
+        self.alarm_word |= 1 << alarm_bit
+        self.trip_locked = self.trip_locked or locked
+        self.output_pct = 0.0
+
+    # -- process data -------------------------------------------------------------------
+    def write_control(self, control_word: int, reference_word: int, now_s: float) -> None:
+        """Take control word and reference from the bus (coils 1-32 or registers)."""
+        self.advance(now_s)
+        self.last_control_write_s = now_s
+        self.timeout_active = False
+        self.control_words_received.append(control_word)
+        if self.local_mode or not control_word & (1 << ctl.CTW_DATA_VALID):
+            return  # local operation, or "data not valid": the drive ignores the word
+        rising_reset = control_word & (1 << ctl.CTW_RESET) and \
+            not self.control_word & (1 << ctl.CTW_RESET)
+        self.control_word = control_word
+        self.reference_word = reference_word & 0xFFFF
+        if rising_reset and not self.trip_locked:
+            self.alarm_word = 0
+
+    def warning_word(self) -> int:
+        """Return par. 16-92."""
+        word = 0
+        if self.timeout_active:
+            word |= 1 << ALARM_CONTROL_WORD_TIMEOUT
+        if self.motor_current_a() > 1.5 * self.config.motor_current_a:
+            word |= 1 << ALARM_OVER_CURRENT
+        return word
+
+    def status_word(self) -> int:
+        """Return the FC-profile status word (manual 004 section 5.6.3)."""
+        bits = {
+            ctl.STW_CONTROL_READY: not self.tripped,
+            ctl.STW_UNIT_READY: True,
+            ctl.STW_ENABLED: bool(self.control_word & (1 << ctl.CTW_COAST_OFF)),
+            ctl.STW_TRIP: self.tripped and not self.trip_locked,
+            ctl.STW_TRIP_LOCKED: self.trip_locked,
+            ctl.STW_WARNING: self.warning_word() != 0,
+            ctl.STW_ON_REFERENCE: self.output_pct == self.target_pct(),
+            ctl.STW_BUS_CONTROL: not self.local_mode,
+            ctl.STW_FREQUENCY_OK: True,
+            ctl.STW_RUNNING: self.output_pct != 0.0 or self.run_requested(),
+            ctl.STW_TORQUE_EXCEEDED: self.motor_current_a() > 1.5 * self.config.motor_current_a,
+            ctl.STW_THERMAL_WARNING: self.temperature_pct > 100.0,
+        }
+        return sum(1 << index for index, value in bits.items() if value)
+
+    def actual_word(self) -> int:
+        """Return the main actual value (output frequency) in FC scaling."""
+        return fc_scaling.percent_to_word(max(-200.0, min(199.99, self.output_pct)))
+
+    # -- parameters ---------------------------------------------------------------------
+    def readout(self, number: int) -> Optional[object]:
+        """Return the live value of a readout parameter (raw units), or None."""
+        frequency_x10 = round(abs(self.output_pct) * self.config.motor_frequency_hz / 10.0)
+        values = {
+            1540: self.config.type_text, 1543: self.config.software_version,
+            1600: self.control_word, 1602: round(fc_scaling.word_to_percent(
+                self.reference_word) * 10), 1603: self.status_word(),
+            1613: frequency_x10, 1614: round(self.motor_current_a() * 100),
+            1618: min(255, round(self.temperature_pct)),
+            1690: self.alarm_word, 1692: self.warning_word(),
+            1694: int(self.output_pct != self.target_pct()),
+        }
+        return values.get(number)
+
+    def read_parameter(self, number: int, count: int, now_s: float) -> list:
+        """Return ``count`` registers of parameter ``number``; raise ParameterError."""
+        self.advance(now_s)
+        value = self.readout(number)
+        if value is None:
+            value = self.parameters.get(number)
+        if value is None:
+            raise ParameterError(NO_SUCH_PARAMETER)
+        if isinstance(value, str):
+            # Manual 004 section 5.4.4: a longer request gets a truncated answer.
+            stored = (len(value) + 1) // 2
+            return text_to_registers(value, 2 * stored)[:count]
+        registers = self._registers(number)
+        if count > registers:
+            raise ParameterError(TYPE_MISMATCH)
+        raw = int(value) & (0xFFFFFFFF if registers == 2 else 0xFFFF)
+        return ([raw >> 16, raw & 0xFFFF] if registers == 2 else [raw])[:count]
+
+    def write_parameter(self, number: int, registers: list, now_s: float) -> None:
+        """Store a parameter write; raise ParameterError with register 7's detail."""
+        self.advance(now_s)
+        if self.readout(number) is not None:
+            raise ParameterError(NO_WRITE_ACCESS)
+        if number not in self.parameters:
+            raise ParameterError(NO_SUCH_PARAMETER)
+        if len(registers) != self._registers(number):
+            raise ParameterError(TYPE_MISMATCH)
+        value = join_u32(*registers) if len(registers) == 2 else registers[0]
+        if number == 804 and value > TIMEOUT_TRIP:
+            raise ParameterError(VALUE_OUT_OF_LIMITS)
+        if number == 124 and self.output_pct != 0.0:
+            raise ParameterError(NOT_IN_THIS_MODE)
+        self.parameters[number] = value
+
+    @staticmethod
+    def _registers(number: int) -> int:
+        spec = fc.PARAMETERS.get(number)
+        if spec is None or spec.data_type == TEXT:
+            return 1
+        return DATA_TYPES[spec.data_type][0]
