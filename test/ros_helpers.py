@@ -9,9 +9,11 @@ import time
 from typing import Dict, List
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.qos import DurabilityPolicy, QoSProfile
-from std_msgs.msg import Float32, String, UInt16
+from std_msgs.msg import Float32, String, UInt16, UInt32
 from std_srvs.srv import Trigger
 
 import yaml  # noqa: I100 - pyyaml comes with the ROS wheels
@@ -73,7 +75,7 @@ def stop_node(process: subprocess.Popen, timeout_s: float = 10.0):
 class RosClient:
     """An rclpy node that records a device's topics and calls its services."""
 
-    def __init__(self, names: List[str], namespace: str = ''):
+    def __init__(self, names: List[str], namespace: str = '', drives: List[str] = ()):
         self.node = rclpy.create_node(f'test_client_{os.getpid()}')
         self.prefix = namespace.rstrip('/') + '/' if namespace else ''
         self.messages: Dict[str, list] = {}
@@ -83,12 +85,23 @@ class RosClient:
                                      ('motor_temperature', Float32, 10),
                                      ('trip_code', UInt16, 10), ('status_word', UInt16, 10)):
                 self._record(f'{self.prefix}{name}/{topic}', kind, qos)
+        for name in drives:
+            for topic, kind in (('speed_feedback', Float32), ('alarm_word', UInt32),
+                                ('warning_word', UInt32)):
+                self._record(f'{self.prefix}{name}/{topic}', kind, 10)
+        self.reference_publishers = {
+            name: self.node.create_publisher(Float32, f'{self.prefix}{name}/speed_reference', 10)
+            for name in drives}
         self._record('/diagnostics', DiagnosticArray, 10)
         # Clients are made once, up front: a client created just before a call can lose its
         # first response while the server has not yet discovered the client's reply reader.
         self.clients = {(name, command): self.node.create_client(
             Trigger, f'{self.prefix}{name}/{command}')
             for name in names for command in ('start', 'stop', 'quick_stop', 'reset')}
+        self.clients.update({(name, 'coast_stop'): self.node.create_client(
+            Trigger, f'{self.prefix}{name}/coast_stop') for name in drives})
+        self.parameters = self.node.create_client(
+            SetParameters, f'{self.prefix or "/"}drive_bridge/set_parameters')
 
     def _record(self, topic, kind, qos):
         self.messages[topic] = []
@@ -119,6 +132,23 @@ class RosClient:
         rclpy.spin_until_future_complete(self.node, future, timeout_sec=timeout_s)
         assert future.done(), f'{name}/{command} did not answer'
         return future.result()
+
+    def set_parameter(self, name: str, value) -> 'SetParameters.Response':
+        """Set one parameter of the node (bool, float or int) and return the result."""
+        kinds = {bool: ('PARAMETER_BOOL', 'bool_value'),
+                 float: ('PARAMETER_DOUBLE', 'double_value'),
+                 int: ('PARAMETER_INTEGER', 'integer_value')}
+        kind, field = kinds[type(value)]
+        parameter = ParameterMsg(name=name, value=ParameterValue(
+            type=getattr(ParameterType, kind), **{field: value}))
+        assert self.parameters.wait_for_service(timeout_sec=5)
+        future = self.parameters.call_async(SetParameters.Request(parameters=[parameter]))
+        rclpy.spin_until_future_complete(self.node, future, timeout_sec=5)
+        assert future.done(), f'setting {name} did not answer'
+        return future.result().results[0]
+
+    def publish_reference(self, name: str, percent: float) -> None:
+        self.reference_publishers[name].publish(Float32(data=float(percent)))
 
     def diagnostics(self, name: str):
         for array in reversed(self.messages['/diagnostics']):

@@ -9,6 +9,7 @@ and a conversion index that scales the whole number on the bus to the value show
 """
 
 from dataclasses import dataclass
+import math
 from typing import Dict, Tuple, Union
 
 from drive_bridge.errors import CommandRefused
@@ -107,8 +108,10 @@ def encode_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -
         raise CommandRefused(f'{spec.name} takes a number, not {value!r}')
     count, _, minimum, maximum = DATA_TYPES[spec.data_type]
     factor = conversion_factor(spec, factors)
+    if not math.isfinite(float(value)):
+        raise CommandRefused(f'{spec.name}: {value} is not a finite number')
     raw = round(float(value) / factor)
-    if abs(raw * factor - float(value)) > factor / 2 + 1e-9:
+    if not math.isclose(raw * factor, float(value), rel_tol=1e-9, abs_tol=factor * 1e-6):
         raise CommandRefused(f'{spec.name}: {value} is not a multiple of {factor:g}')
     if not minimum <= raw <= maximum:
         raise CommandRefused(

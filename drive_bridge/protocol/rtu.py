@@ -124,6 +124,31 @@ def write_register_request(unit: int, address: int, value: int) -> RtuFrame:
     return RtuFrame(unit, WRITE_SINGLE_REGISTER, struct.pack('>HH', address, value))
 
 
+def read_coils_request(unit: int, address: int, count: int) -> RtuFrame:
+    """Return a function 01 request for ``count`` coils from coil address ``address``."""
+    return RtuFrame(unit, READ_COILS, struct.pack('>HH', address, count))
+
+
+def pack_coils(coils: list) -> bytes:
+    """Pack coils eight to a byte, the first coil in the lowest bit (Modbus 01/0F)."""
+    return bytes(sum(1 << bit for bit, on in enumerate(coils[start:start + 8]) if on)
+                 for start in range(0, len(coils), 8))
+
+
+def write_coils_request(unit: int, address: int, coils: list) -> RtuFrame:
+    """Return a function 0F request writing ``coils`` (bools) from coil address ``address``."""
+    packed = pack_coils(coils)
+    return RtuFrame(unit, WRITE_MULTIPLE_COILS,
+                    struct.pack('>HHB', address, len(coils), len(packed)) + packed)
+
+
+def write_registers_request(unit: int, address: int, values: list) -> RtuFrame:
+    """Return a function 10 request writing ``values`` from frame address ``address``."""
+    payload = b''.join(struct.pack('>H', value & 0xFFFF) for value in values)
+    return RtuFrame(unit, WRITE_MULTIPLE_REGISTERS,
+                    struct.pack('>HHB', address, len(values), len(payload)) + payload)
+
+
 def registers_response(unit: int, function: int, values: list) -> RtuFrame:
     """Return a read-registers response carrying ``values``."""
     payload = b''.join(struct.pack('>H', value & 0xFFFF) for value in values)

@@ -70,9 +70,7 @@ class FcSimDevice:
         address, count = rtu.parse_address_count(data)
         if count < 1 or address + count > COIL_COUNT:
             raise SlaveError(ILLEGAL_ADDRESS)
-        coils = self._coils(now_s)[address:address + count]
-        packed = bytes(sum(1 << i for i, on in enumerate(coils[start:start + 8]) if on)
-                       for start in range(0, count, 8))
+        packed = rtu.pack_coils(self._coils(now_s)[address:address + count])
         return bytes([len(packed)]) + packed
 
     def _write_coil(self, data: bytes, now_s: float) -> bytes:

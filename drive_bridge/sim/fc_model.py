@@ -184,6 +184,7 @@ class FcModel:
         self.reference_word = reference_word & 0xFFFF
         if rising_reset and not self.trip_locked:
             self.alarm_word = 0
+        self.advance(now_s)  # a coast takes effect at once
 
     def warning_word(self) -> int:
         """Return par. 16-92."""

@@ -1,0 +1,171 @@
+"""Unit tests of the bus with FC-profile drives: keepalive, deadman, set-up, exceptions."""
+
+from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
+from drive_bridge.devices import fc
+from drive_bridge.devices.base import ReadCoils, ReadRegisters, WriteCoils, WriteRegisters
+from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.errors import CommandRefused, DeviceException, NoResponse
+from drive_bridge.protocol import words
+import pytest
+
+RTT_S = 0.02
+
+
+class FakeClock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+    def sleep(self, seconds):
+        self.now += seconds
+
+
+class FakeDrive:
+    """One drive on a fake bus: answers the status coils and readouts, logs writes."""
+
+    def __init__(self, clock):
+        self.clock = clock
+        self.connected = False
+        self.status_word = 0x0607
+        self.silent = False
+        self.refuse = {}  # frame address -> exception code
+        self.log = []
+
+    def connect(self):
+        self.connected = True
+
+    def close(self):
+        self.connected = False
+
+    def execute(self, unit, transaction):
+        self.log.append((self.clock.now, transaction))
+        if self.silent:
+            self.clock.now += 0.2
+            raise NoResponse('no reply within 0.2 s')
+        self.clock.now += RTT_S
+        address = getattr(transaction, 'address', None)
+        if address in self.refuse:
+            raise DeviceException(self.refuse[address])
+        if isinstance(transaction, ReadCoils):
+            return list(words.words_to_coils([self.status_word, 0]))
+        if isinstance(transaction, ReadRegisters):
+            if transaction.address == 6:
+                return [17]
+            return [0] * transaction.count
+        return None
+
+    def writes(self, kind=WriteCoils):
+        return [(t, txn) for t, txn in self.log if isinstance(txn, kind)]
+
+
+def make_bus(timeout_s=0.0, **profile_options):
+    clock = FakeClock()
+    drive = FakeDrive(clock)
+    profile = DriveProfile(fc.DATA, 'fc51', **profile_options)
+    spec = DeviceSpec('conv', 1, profile, poll_rate_hz=10.0, reference_timeout_s=timeout_s)
+    events = []
+    bus = BusMaster(drive, [spec], BusTiming(retries=0, offline_after=2,
+                                             backoff_initial_s=1.0, backoff_max_s=2.0),
+                    listener=events.append, clock=clock, sleep=clock.sleep)
+    return bus, drive, clock, events
+
+
+def run_for(bus, clock, seconds):
+    end = clock.now + seconds
+    while clock.now < end:
+        wait = bus.run_once()
+        if wait > 0:
+            clock.now += min(wait, end - clock.now)
+
+
+def control_words(drive):
+    return [words.coils_to_words(list(txn.values))[0] for _, txn in drive.writes()]
+
+
+def test_no_write_until_a_command_then_keepalive_at_the_poll_rate():
+    bus, drive, clock, _ = make_bus()
+    run_for(bus, clock, 2.0)
+    assert drive.writes() == [] and drive.writes(WriteRegisters) == []
+    bus.submit_command('conv', 'start')
+    run_for(bus, clock, 1.0)
+    assert control_words(drive)[0] == 0x047C
+    assert 9 <= len(drive.writes()) <= 12  # one rewrite a poll at 10 Hz
+
+
+def test_offline_drive_forgets_the_command_and_writes_nothing_after_it_returns():
+    bus, drive, clock, events = make_bus()
+    run_for(bus, clock, 0.5)
+    bus.submit_command('conv', 'start')
+    run_for(bus, clock, 0.5)
+    drive.silent = True
+    run_for(bus, clock, 1.0)
+    assert [e.kind for e in events if e.kind == 'offline'] == ['offline']
+    drive.silent = False
+    count = len(drive.writes())
+    run_for(bus, clock, 5.0)
+    assert bus.snapshot('conv').online
+    assert len(drive.writes()) == count  # back online: nothing written without a command
+
+
+def test_speed_reference_goes_out_with_the_next_cycle():
+    bus, drive, clock, _ = make_bus()
+    run_for(bus, clock, 0.3)
+    assert bus.set_speed_reference('conv', 40.0) == 0x1999
+    bus.submit_command('conv', 'start')
+    run_for(bus, clock, 0.2)
+    bus.set_speed_reference('conv', -50.0)
+    bus.run_once()
+    references = [words.coils_to_words(list(txn.values))[1] for _, txn in drive.writes()]
+    assert references[0] == 0x1999 and references[-1] == 0xE000
+    with pytest.raises(CommandRefused, match='nothing sent'):
+        bus.set_speed_reference('conv', float('nan'))
+    assert bus.snapshot('conv').stats['rejected_references'] == '1'
+
+
+def test_deadman_ramp_stops_when_reference_messages_stop():
+    bus, drive, clock, events = make_bus(timeout_s=0.5)
+    run_for(bus, clock, 0.3)
+    bus.submit_command('conv', 'start')
+    for _ in range(10):  # messages every 0.2 s keep it running
+        bus.set_speed_reference('conv', 30.0, from_topic=True)
+        run_for(bus, clock, 0.2)
+    assert set(control_words(drive)) == {0x047C}
+    run_for(bus, clock, 1.0)
+    assert control_words(drive)[-1] == 0x043C
+    assert bus.snapshot('conv').stats['deadman_stops'] == '1'
+    assert any(e.kind == 'notice' and 'reference timeout' in e.message for e in events)
+    run_for(bus, clock, 2.0)  # the stop word is kept up; no second deadman stop
+    assert bus.snapshot('conv').stats['deadman_stops'] == '1'
+
+
+def test_setup_writes_when_the_drive_comes_online():
+    bus, drive, clock, _ = make_bus(comms_timeout_s=1.0, comms_timeout_function=2)
+    run_for(bus, clock, 0.5)
+    setup = [txn for _, txn in drive.log
+             if getattr(txn, 'address', None) in (8029, 8039)]
+    assert setup[0] == WriteRegisters(8029, (0, 10))
+    assert len(setup) == 2
+
+
+def test_exception_04_reads_register_7_for_the_detail():
+    bus, drive, clock, _ = make_bus()
+    run_for(bus, clock, 0.3)
+    drive.refuse[fc.DATA.spec(124).address] = 4
+    future = bus.write_parameter('conv', 124, 2.5)
+    run_for(bus, clock, 0.1)
+    with pytest.raises(CommandRefused) as error:
+        future.result(timeout=0)
+    assert 'not possible in the present mode' in str(error.value)
+    assert 'register 7 = 17' in str(error.value)
+
+
+def test_local_operation_refuses_commands_before_sending():
+    bus, drive, clock, _ = make_bus()
+    drive.status_word = 0x0407
+    run_for(bus, clock, 0.3)
+    future = bus.submit_command('conv', 'start')
+    with pytest.raises(CommandRefused, match='local operation'):
+        future.result(timeout=0)
+    assert drive.writes() == []
