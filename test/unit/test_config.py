@@ -1,10 +1,13 @@
 """Unit tests of configuration validation: one clear line per bad value."""
 
+import glob
 import math
+import os
 
 from drive_bridge import config
 from drive_bridge.errors import ConfigError
 import pytest
+import yaml
 
 GOOD_DEVICE = {'family': 'mcd', 'model': 'mcd500', 'address': 20}
 
@@ -76,3 +79,41 @@ def test_make_spec_builds_the_profile():
     spec = build().devices[0].make_spec()
     assert spec.unit == 20 and spec.profile.family == 'mcd'
     assert spec.profile.configured_model == 'mcd500'
+
+
+@pytest.mark.parametrize('path', sorted(glob.glob(os.path.join(
+    os.path.dirname(__file__), '..', '..', 'config', '*.yaml'))))
+def test_shipped_config_files_are_valid(path):
+    with open(path) as stream:
+        parameters = yaml.safe_load(stream)['/**/drive_bridge']['ros__parameters']
+    names = parameters['devices']
+    devices = {name: parameters.pop(name) for name in names}
+    built = config.build_config(parameters, devices)
+    assert [device.name for device in built.devices] == names
+    for device in built.devices:
+        device.make_spec()
+
+
+@pytest.mark.parametrize('device, message', [
+    ({'family': 'mcd', 'speed_reference': 10.0},
+     "'starter.speed_reference' applies to drives only (families fc), not mcd"),
+    ({'family': 'fc', 'model': 'auto', 'address': 1, 'speed_reference': 200.0},
+     "'starter.speed_reference' = 200.0 is out of range: allowed [-200, 200)"),
+    ({'family': 'fc', 'address': 1, 'model': 'auto', 'speed_reference': math.nan},
+     'must be a finite number'),
+    ({'family': 'fc', 'address': 1, 'model': 'auto', 'comms_timeout_function': 6},
+     "'starter.comms_timeout_function' = 6 is invalid: allowed -1, 0, 1, 2, 3, 4, 5"),
+    ({'family': 'fc', 'address': 248, 'model': 'auto'},
+     "'starter.address' = 248 is out of range: allowed [1, 247]"),
+])
+def test_drive_settings(device, message):
+    with pytest.raises(ConfigError) as error:
+        build({}, {'starter': {**GOOD_DEVICE, **device}})
+    assert message in str(error.value)
+
+
+def test_drive_config_sets_the_reference():
+    built = build({}, {'starter': {'family': 'fc', 'address': 1, 'speed_reference': 40.0,
+                                   'reference_timeout': 1.5}})
+    spec = built.devices[0].make_spec()
+    assert spec.profile.reference_word == 0x1999 and spec.reference_timeout_s == 1.5

@@ -1,0 +1,108 @@
+"""
+Benchmark: FC 51 cycle time and transactions per cycle at 9600 and 19200 baud, 8E1.
+
+One simulated FC 51, started (so the control word and reference are rewritten every
+cycle), polled as fast as the bus allows. The simulator holds every reply back to the wire
+time of an 8E1 line with 3.5-character gaps, so the pty behaves like a paced wire. Prints
+the cycle time, the transactions per cycle, and the wire-time minimum of the same frames.
+Run: .venv/bin/python bench/fc_cycle.py [seconds per case]
+"""
+
+import math
+import sys
+import time
+
+from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
+from drive_bridge.devices import fc
+from drive_bridge.devices.base import (
+    PollItem, ReadCoils, ReadRegisters, WriteCoils, WriteRegister, WriteRegisters)
+from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.protocol import rtu
+from drive_bridge.sim.devices import make_sim_server
+from drive_bridge.sim.modbus_server import WireTiming
+from drive_bridge.transport.modbus import (
+    LinkSettings, ModbusTransport, PYMODBUS_VERSION, wire_time_s)
+
+
+def frame_bytes(transaction) -> tuple:
+    """Return (request bytes, reply bytes) of one transaction in RTU framing."""
+    if isinstance(transaction, WriteCoils):
+        return 9 + math.ceil(len(transaction.values) / 8), 8
+    if isinstance(transaction, ReadCoils):
+        return 8, 5 + math.ceil(transaction.count / 8)
+    if isinstance(transaction, ReadRegisters):
+        return 8, 5 + 2 * transaction.count
+    if isinstance(transaction, WriteRegisters):
+        return 9 + 2 * len(transaction.values), 8
+    if isinstance(transaction, WriteRegister):
+        return 8, 8
+    raise TypeError(transaction)
+
+
+class CountingProfile(DriveProfile):
+    """The FC profile, counting the wire time of every planned transaction."""
+
+    def __init__(self, settings: LinkSettings):
+        super().__init__(fc.DATA, 'fc51')
+        self.settings = settings
+        self.wire_s = 0.0
+        self.transactions = 0
+
+    def _count(self, items):
+        for item in items:
+            transaction = item.transaction if isinstance(item, PollItem) else item
+            self.wire_s += wire_time_s(self.settings, *frame_bytes(transaction))
+            self.transactions += 1
+        return items
+
+    def poll_plan(self):
+        return self._count(super().poll_plan())
+
+    def follow_up_plan(self, results):
+        return self._count(super().follow_up_plan(results))
+
+
+def bench(baudrate: int, seconds: float) -> dict:
+    server = make_sim_server({1: 'fc51'}, wire=WireTiming(baudrate, 'E', 1))
+    server.open_pty()
+    server.start()
+    settings = LinkSettings(port=server.pty_path, baudrate=baudrate, parity='N',
+                            timeout_s=0.5)  # the pty takes N; the wire timing is 8E1
+    wire_settings = LinkSettings(baudrate=baudrate, parity='E')
+    profile = CountingProfile(wire_settings)
+    readings = []
+    bus = BusMaster(ModbusTransport(settings),
+                    [DeviceSpec('conv', 1, profile, poll_rate_hz=100.0)],
+                    BusTiming(frame_gap_s=rtu.frame_gap_s(baudrate, 'E', 1)),
+                    listener=lambda event: readings.append(event.kind == 'reading'))
+    for _ in range(4):  # connect, identify
+        bus.run_once()
+    bus.submit_command('conv', 'start')
+    for _ in range(4):
+        bus.run_once()
+    profile.wire_s, profile.transactions, polls_before = 0.0, 0, sum(readings)
+    started = time.monotonic()
+    while time.monotonic() - started < seconds:
+        bus.run_once()
+    elapsed = time.monotonic() - started
+    polls = sum(readings) - polls_before
+    bus.shutdown(stop_motors=False)
+    server.stop()
+    return {'cycle_ms': 1000 * elapsed / polls, 'tx_per_cycle': profile.transactions / polls,
+            'wire_ms': 1000 * profile.wire_s / polls, 'polls': polls}
+
+
+def main() -> None:
+    seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 5.0
+    print(f'pymodbus {PYMODBUS_VERSION}; 1 simulated FC 51 running, 8E1 wire, '
+          f'{seconds:g} s per case')
+    print('baud   cycle ms  tx/cycle  wire-time ms/cycle  fraction  cycles/s')
+    for baudrate in (9600, 19200):
+        result = bench(baudrate, seconds)
+        print(f'{baudrate:5d}  {result["cycle_ms"]:8.1f}  {result["tx_per_cycle"]:8.2f}  '
+              f'{result["wire_ms"]:18.1f}  {result["wire_ms"] / result["cycle_ms"]:7.1%}  '
+              f'{1000 / result["cycle_ms"]:8.1f}')
+
+
+if __name__ == '__main__':
+    main()
