@@ -105,6 +105,10 @@ DEVICE_SETTINGS: Tuple[Setting, ...] = (
             'drives: what the drive does on a control word timeout (FC: par. 8-04; 0 off, '
             '1 freeze, 2 stop, 3 jog, 4 max speed, 5 stop and trip); -1 = leave as set',
             choices=(-1, 0, 1, 2, 3, 4, 5), drives_only=True),
+    Setting('current_parameter', int, 0,
+            "drives: parameter number of the motor current readout; 0 = the model's own "
+            '(FC 51: 1614 = 16-14; VLT 5000: 520; VLT 6000: 514)',
+            low=0, high=6553, drives_only=True),
 )
 BUS_SETTING = {setting.name: setting for setting in BUS_SETTINGS}
 DEVICE_SETTING = {setting.name: setting for setting in DEVICE_SETTINGS}
@@ -126,6 +130,7 @@ class DeviceConfig:
     reference_timeout: float = 0.0
     comms_timeout: float = 0.0
     comms_timeout_function: int = -1
+    current_parameter: int = 0
 
     @property
     def is_drive(self) -> bool:
@@ -248,8 +253,10 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
             raise ConfigError(f'parameter {name + "." + key!r} applies to drives only '
                               f'(families {", ".join(drive_families())}), not {family.name}')
     if checked['model'] not in family.models:
+        hint = ' (this family cannot report its model: name it)' \
+            if checked['model'] == 'auto' else ''
         raise ConfigError(f'parameter {name + ".model"!r} = {checked["model"]!r} is invalid '
-                          f'for family {family.name}: allowed {", ".join(family.models)}')
+                          f'for family {family.name}{hint}: allowed {", ".join(family.models)}')
     low, high = family.address_range
     if not low <= checked['address'] <= high:
         raise ConfigError(f'parameter {name + ".address"!r} = {checked["address"]} is out of '
@@ -257,7 +264,12 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
     if protocol not in family.protocols:
         raise ConfigError(f'device {name!r} (family {family.name}) cannot run on protocol '
                           f'{protocol!r}: allowed {", ".join(family.protocols)}')
-    return DeviceConfig(name=name, **checked)
+    device = DeviceConfig(name=name, **checked)
+    try:
+        device.make_spec()  # the profile checks what the tables alone cannot
+    except ConfigError as error:
+        raise ConfigError(f'device {name!r}: {error}') from None
+    return device
 
 
 def device_settings(family: str) -> Tuple[Setting, ...]:

@@ -84,6 +84,10 @@ class DriveProfile:
         if model not in data.models:
             raise ConfigError(f'unknown {data.name} model {model!r}: allowed '
                               f'{", ".join(data.models)}')
+        if comms_timeout_function >= 0 and data.timeout_function_parameter is None:
+            raise ConfigError(f'comms_timeout_function applies to drives with a control word '
+                              f'timeout function parameter (FC 8-04), not {data.name}: leave it '
+                              'at -1 and set the drive on the drive')
         self.data = data
         self.family = data.name
         self.configured_model = model
@@ -105,9 +109,14 @@ class DriveProfile:
 
     # -- model and readouts -------------------------------------------------------------
     @property
+    def default_model(self) -> str:
+        """Return the model whose map is used until the drive tells its own."""
+        return self.model or next(model for model in self.data.models if model != 'auto')
+
+    @property
     def readouts(self) -> Dict[str, ParameterSpec]:
         """Return readout name -> parameter spec for the resolved model."""
-        model = self.model or self.data.models[1]
+        model = self.default_model
         numbers = dict(self.data.readouts[model], **self.readout_overrides)
         return {name: self.data.spec(number) for name, number in numbers.items()}
 
@@ -219,7 +228,7 @@ class DriveProfile:
         type_text = self.identity.get('drive_type', '')
         reported = self.data.model_from_type(type_text) if type_text else None
         if self.configured_model == 'auto':
-            self.model = reported or self.data.models[1]
+            self.model = reported or self.default_model
         elif type_text.upper().startswith('FC') and reported != self.configured_model:
             self._identified = False  # ask again after the configuration is fixed
             raise ModelMismatch(

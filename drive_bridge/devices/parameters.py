@@ -100,8 +100,11 @@ def encode_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -
     if spec.data_type == TEXT:
         if not isinstance(value, str):
             raise CommandRefused(f'{spec.name} is a text parameter: give a string')
-        try:
-            return text_to_registers(value, spec.characters)
+        if len(value) > spec.characters:
+            raise CommandRefused(f'{spec.name}: {value!r} is longer than {spec.characters} '
+                                 'characters')
+        try:  # as many registers as the text needs, an odd length filled with a space
+            return text_to_registers(value, len(value) + len(value) % 2)
         except (ValueError, UnicodeEncodeError) as error:
             raise CommandRefused(f'{spec.name}: {error}') from None
     if isinstance(value, (str, bool)):

@@ -3,7 +3,7 @@
 from dataclasses import dataclass
 from typing import Callable, Dict, Tuple
 
-from drive_bridge.devices import fc, mcd
+from drive_bridge.devices import fc, mcd, vlt
 from drive_bridge.devices.drive import DriveProfile
 
 
@@ -22,8 +22,10 @@ class Family:
 
 def _drive_profile(data):
     def make(device) -> DriveProfile:
+        overrides = {'motor_current': device.current_parameter} \
+            if device.current_parameter else {}
         return DriveProfile(data, device.model, device.current_scale, device.comms_timeout,
-                            device.comms_timeout_function)
+                            device.comms_timeout_function, overrides)
     return make
 
 
@@ -39,6 +41,11 @@ FAMILIES: Dict[str, Family] = {
         models=fc.MODELS, address_range=fc.ADDRESS_RANGE,
         protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'), is_drive=True,
         make_profile=_drive_profile(fc.DATA)),
+    'vlt': Family(
+        name='vlt', description='VLT 5000 / VLT 6000 HVAC with the Modbus RTU option card',
+        models=vlt.MODELS, address_range=vlt.ADDRESS_RANGE,
+        protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'), is_drive=True,
+        make_profile=_drive_profile(vlt.DATA)),
 }
 # Families of the ROS contract that this version does not implement yet.
-PLANNED_FAMILIES = ('vlt', 'lvsg')
+PLANNED_FAMILIES = ('lvsg',)

@@ -77,6 +77,7 @@ def build_server(args: argparse.Namespace) -> ModbusSimServer:
                 'motor_flc_a': args.flc},
         'fc': {'ramp_up_s': args.ramp_up, 'ramp_down_s': args.ramp_down},
     }
+    settings['vlt'] = settings['fc']
     devices: Dict[int, object] = {}
     for model, unit in args.device:
         if unit in devices:

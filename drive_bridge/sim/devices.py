@@ -23,6 +23,8 @@ def _fc(model: str, now_s: float, settings: dict) -> FcSimDevice:
 SIM_MODELS: Dict[str, tuple] = {
     **{model: ('mcd', _mcd) for model in mcd.MODEL_FEATURES},
     'fc51': ('fc', _fc),
+    'vlt5000': ('vlt', _fc),
+    'vlt6000': ('vlt', _fc),
 }
 
 
@@ -39,7 +41,7 @@ def make_sim_server(models: Dict[int, str], wire: Optional[WireTiming] = None,
     """
     Return a simulated bus with one device per address: ``{20: 'mcd500', 1: 'fc51'}``.
 
-    ``settings`` maps a family (``mcd``, ``fc``) to keyword settings of its devices'
+    ``settings`` maps a family (``mcd``, ``fc``, ``vlt``) to keyword settings of its devices'
     simulator config, e.g. ``{'fc': {'ramp_up_s': 0.5}}``.
     """
     settings = settings or {}

@@ -1,10 +1,16 @@
 """
-An FC 51's built-in Modbus RTU interface as a simulated slave, onto :class:`FcModel`.
+Simulated Modbus faces of FC-profile drives, onto :class:`FcModel`.
 
-Map (manual 004 section 5.2.8): coils 1-16 control word, 17-32 reference, 33-48 status
-word, 49-64 main actual value, 65 EEPROM store; holding registers 7 last error, 9 index,
-50000 CTW, 50010 REF, 50200 STW, 50210 MAV (frame address = number - 1), parameter PNU
-at 10 * PNU - 1. Functions 01, 03, 05, 06, 0F, 10; others answer exception 01.
+FC 51 built-in interface (manual 004 section 5.2.8): coils 1-16 control word, 17-32
+reference, 33-48 status word, 49-64 main actual value, 65 EEPROM store; holding registers
+7 last error, 9 index, 50000 CTW, 50010 REF, 50200 STW, 50210 MAV (frame address = number -
+1), parameter PNU at 10 * PNU - 1. Functions 01, 03, 05, 06, 0F, 10; others exception 01;
+a parameter error is exception 04 with the detail in register 7.
+
+VLT 5000/6000 option card (manual 003 "Memory Mapping"): the same coils; registers 1 IND,
+2/3 Modbus and drive comms timeouts (10 ms units), parameter N at 10 * N - 1; a parameter
+error is answered with the drive's own error code as the exception code (0, 1, 2, 5, 17 ...),
+bad addresses with 64, bad lengths with 66, other functions with 67.
 """
 
 import struct
@@ -16,6 +22,8 @@ from drive_bridge.protocol.words import coils_to_words, words_to_coils
 from drive_bridge.sim.fc_model import FcModel, ParameterError
 
 ILLEGAL_FUNCTION, ILLEGAL_ADDRESS, ILLEGAL_VALUE, DEVICE_FAILURE = 1, 2, 3, 4
+# The option card's own codes for the same faults ("VLT 6000 Errors").
+OPTION_CARD_CODES = {ILLEGAL_FUNCTION: 67, ILLEGAL_ADDRESS: 64, ILLEGAL_VALUE: 66}
 COIL_COUNT = 65
 REGISTER_LAST_ERROR, REGISTER_INDEX = 6, 8
 REGISTER_CTW, REGISTER_REF, REGISTER_STW, REGISTER_MAV = 49999, 50009, 50199, 50209
@@ -34,6 +42,7 @@ class FcSimDevice:
 
     def __init__(self, model: FcModel):
         self.model = model
+        self.option_card = model.family == 'vlt'
         self._handlers: Dict[int, Callable[[bytes, float], bytes]] = {
             rtu.READ_COILS: self._read_coils,
             rtu.READ_HOLDING_REGISTERS: self._read_registers,
@@ -53,10 +62,14 @@ class FcSimDevice:
                 raise SlaveError(ILLEGAL_FUNCTION if handler is None else ILLEGAL_VALUE)
             return RtuFrame(frame.unit, frame.function, handler(frame.data, now_s))
         except ParameterError as error:
+            if self.option_card:
+                return rtu.exception_response(frame.unit, frame.function, error.detail)
             self.model.last_error = error.detail
             return rtu.exception_response(frame.unit, frame.function, DEVICE_FAILURE)
         except SlaveError as error:
-            return rtu.exception_response(frame.unit, frame.function, error.code)
+            code = OPTION_CARD_CODES.get(error.code, error.code) if self.option_card \
+                else error.code
+            return rtu.exception_response(frame.unit, frame.function, code)
 
     # -- coils --------------------------------------------------------------------------
     def _coils(self, now_s: float) -> List[bool]:
@@ -113,9 +126,12 @@ class FcSimDevice:
     def _register_values(self, address: int, count: int, now_s: float) -> List[int]:
         model = self.model
         model.advance(now_s)
-        fixed = {REGISTER_LAST_ERROR: model.last_error, REGISTER_INDEX: model.index,
-                 REGISTER_CTW: model.control_word, REGISTER_REF: model.reference_word,
-                 REGISTER_STW: model.status_word(), REGISTER_MAV: model.actual_word()}
+        if self.option_card:
+            fixed = {0: model.index, 1: model.card_timeouts[0], 2: model.card_timeouts[1]}
+        else:
+            fixed = {REGISTER_LAST_ERROR: model.last_error, REGISTER_INDEX: model.index,
+                     REGISTER_CTW: model.control_word, REGISTER_REF: model.reference_word,
+                     REGISTER_STW: model.status_word(), REGISTER_MAV: model.actual_word()}
         if address in fixed:
             if count != 1:
                 raise SlaveError(ILLEGAL_ADDRESS)
@@ -138,7 +154,14 @@ class FcSimDevice:
 
     def _store_registers(self, address: int, values: List[int], now_s: float) -> None:
         model = self.model
-        if address == REGISTER_INDEX and len(values) == 1:
+        if self.option_card and address in (0, 1, 2) and len(values) == 1:
+            if address == 0:
+                model.index = values[0]
+            else:
+                model.card_timeouts[address - 1] = values[0]
+        elif self.option_card:
+            model.write_parameter(self._parameter_number(address), values, now_s)
+        elif address == REGISTER_INDEX and len(values) == 1:
             model.index = values[0]
         elif address == REGISTER_CTW and len(values) == 1:
             model.write_control(values[0], model.reference_word, now_s)

@@ -1,5 +1,10 @@
 """
-Behaviour model of an FC-profile drive (VLT Micro Drive FC 51), with explicit time. Pure.
+Behaviour model of an FC-profile drive, with explicit time. Pure.
+
+Two variants share it: the VLT Micro Drive FC 51 (``family='fc'``) and a VLT 5000/6000 behind
+the Modbus RTU option card (``family='vlt'``); they differ in their parameter tables, the
+readout numbers and where the comms timeout is set (FC: par. 8-03/8-04; option card:
+register 2, 10 ms units, after which the simulated drive ramp-stops).
 
 It follows the FC control profile of manual 004 section 5.6: the control word is obeyed only
 with bit 10 (data valid) set and only under bus control (status word bit 9); the output
@@ -12,10 +17,10 @@ from dataclasses import dataclass, field
 import math
 from typing import Dict, Optional
 
-from drive_bridge.devices import fc
+from drive_bridge.devices import fc, vlt
 from drive_bridge.devices.parameters import DATA_TYPES, TEXT
 from drive_bridge.protocol import fc_control as ctl, fc_scaling
-from drive_bridge.protocol.words import join_u32, text_to_registers
+from drive_bridge.protocol.words import join_u32, registers_to_text, text_to_registers
 
 # Alarm word bits (manual 004 section 7.1.1).
 ALARM_CONTROL_WORD_TIMEOUT = 4
@@ -39,7 +44,7 @@ class ParameterError(Exception):
 class FcSimConfig:
     """Settings of one simulated drive; times in seconds, currents in amperes."""
 
-    model: str = 'fc51'
+    model: str = 'fc51'  # fc51, vlt5000 or vlt6000
     type_text: str = 'FC-051PK75T4E20H3BXCXXXSXXXX'
     software_version: str = '2.70'
     motor_frequency_hz: float = 50.0  # par. 1-23, = 100 % reference
@@ -60,6 +65,8 @@ class FcModel:
 
     def __init__(self, config: Optional[FcSimConfig] = None, now_s: float = 0.0):
         self.config = config or FcSimConfig()
+        self.family = 'vlt' if self.config.model.startswith('vlt') else 'fc'
+        self.table = vlt.PARAMETERS if self.family == 'vlt' else fc.PARAMETERS
         self.now_s = now_s
         self.control_word = 0  # last control word received (0 = not yet)
         self.reference_word = 0
@@ -72,16 +79,20 @@ class FcModel:
         self.last_control_write_s: Optional[float] = None
         self.timeout_active = False
         self.last_error = 0
-        self.index = 0
         self.control_words_received = []
-        self.parameters: Dict[int, int] = {
+        # The ramps live under the FC numbers 3-41, 3-42 and 3-81 in both variants.
+        self.parameters: Dict[int, object] = {
             341: round(self.config.ramp_up_s * 100), 342: round(self.config.ramp_down_s * 100),
             381: round(self.config.quick_stop_ramp_s * 100),
+        }
+        self.parameters.update({
             124: round(self.config.motor_current_a * 100),
             803: round(self.config.ctw_timeout_s * 10), 804: self.config.ctw_timeout_function,
             734: 0, 3: 0,
-        }
+        } if self.family == 'fc' else {104: 50, 533: ''})
         self.parameters.update(self.config.extra_parameters)
+        self.index = 0  # FC: register 9; option card: IND, register 1
+        self.card_timeouts = [0, 0]  # option card registers 2 and 3, 10 ms units
 
     # -- time ---------------------------------------------------------------------------
     @property
@@ -96,16 +107,28 @@ class FcModel:
 
     def target_pct(self) -> float:
         """Return where the output is heading: the reference while running, else 0."""
-        if self.timeout_active and self.parameters[804] == TIMEOUT_FREEZE:
+        if self.timeout_active and self.timeout_function() == TIMEOUT_FREEZE:
             return self.output_pct
-        if self.timeout_active and self.parameters[804] == TIMEOUT_MAX:
+        if self.timeout_active and self.timeout_function() == TIMEOUT_MAX:
             return 100.0
         if not self.run_requested() or self._stop_by_timeout():
             return 0.0
         return fc_scaling.word_to_percent(self.reference_word)
 
     def _stop_by_timeout(self) -> bool:
-        return self.timeout_active and self.parameters[804] in (TIMEOUT_STOP, TIMEOUT_TRIP)
+        return self.timeout_active and self.timeout_function() in (TIMEOUT_STOP, TIMEOUT_TRIP)
+
+    def timeout_function(self) -> int:
+        """Return what a comms timeout does (FC: par. 8-04; option card: stop)."""
+        if self.family == 'vlt':
+            return TIMEOUT_STOP if self.card_timeouts[0] else TIMEOUT_OFF
+        return self.parameters[804]
+
+    def timeout_s(self) -> float:
+        """Return the comms timeout (FC: par. 8-03 in 0.1 s; option card: register 2)."""
+        if self.family == 'vlt':
+            return self.card_timeouts[0] / 100.0
+        return self.parameters[803] / 10.0
 
     def advance(self, now_s: float) -> None:
         """Advance ramps, control word timeout, current and temperature to ``now_s``."""
@@ -134,8 +157,8 @@ class FcModel:
             self.output_pct += math.copysign(step, target - self.output_pct)
 
     def _check_timeout(self, now_s: float) -> None:
-        function = self.parameters[804]
-        timeout_s = self.parameters[803] / 10.0
+        function = self.timeout_function()
+        timeout_s = self.timeout_s()
         if function == TIMEOUT_OFF or self.last_control_write_s is None or \
                 now_s - self.last_control_write_s < timeout_s:
             return
@@ -220,12 +243,17 @@ class FcModel:
     # -- parameters ---------------------------------------------------------------------
     def readout(self, number: int) -> Optional[object]:
         """Return the live value of a readout parameter (raw units), or None."""
+        current_x100 = round(self.motor_current_a() * 100)
+        if self.family == 'vlt':
+            return {514: current_x100, 520: current_x100, 538: self.alarm_word,
+                    540: self.warning_word(), 541: int(self.output_pct != self.target_pct()),
+                    953: 0}.get(number)
         frequency_x10 = round(abs(self.output_pct) * self.config.motor_frequency_hz / 10.0)
         values = {
             1540: self.config.type_text, 1543: self.config.software_version,
             1600: self.control_word, 1602: round(fc_scaling.word_to_percent(
                 self.reference_word) * 10), 1603: self.status_word(),
-            1613: frequency_x10, 1614: round(self.motor_current_a() * 100),
+            1613: frequency_x10, 1614: current_x100,
             1618: min(255, round(self.temperature_pct)),
             1690: self.alarm_word, 1692: self.warning_word(),
             1694: int(self.output_pct != self.target_pct()),
@@ -241,6 +269,7 @@ class FcModel:
         if value is None:
             raise ParameterError(NO_SUCH_PARAMETER)
         if isinstance(value, str):
+            self._check_text_mode(vlt.TEXT_READ_INDEX)
             # Manual 004 section 5.4.4: a longer request gets a truncated answer.
             stored = (len(value) + 1) // 2
             return text_to_registers(value, 2 * stored)[:count]
@@ -257,18 +286,29 @@ class FcModel:
             raise ParameterError(NO_WRITE_ACCESS)
         if number not in self.parameters:
             raise ParameterError(NO_SUCH_PARAMETER)
+        spec = self.table.get(number)
+        if spec is not None and spec.data_type == TEXT:
+            self._check_text_mode(vlt.TEXT_WRITE_INDEX)
+            if len(registers) > 10:
+                raise ParameterError(VALUE_OUT_OF_LIMITS)
+            self.parameters[number] = registers_to_text(registers)
+            return
         if len(registers) != self._registers(number):
             raise ParameterError(TYPE_MISMATCH)
         value = join_u32(*registers) if len(registers) == 2 else registers[0]
-        if number == 804 and value > TIMEOUT_TRIP:
+        if number == 804 and self.family == 'fc' and value > TIMEOUT_TRIP:
             raise ParameterError(VALUE_OUT_OF_LIMITS)
-        if number == 124 and self.output_pct != 0.0:
+        if number in (124, 104) and self.output_pct != 0.0:
             raise ParameterError(NOT_IN_THIS_MODE)
         self.parameters[number] = value
 
-    @staticmethod
-    def _registers(number: int) -> int:
-        spec = fc.PARAMETERS.get(number)
+    def _check_text_mode(self, mode: int) -> None:
+        """Option card: a text access needs IND = 0x0400 (read) or 0x0500 (write) first."""
+        if self.family == 'vlt' and self.index & 0xFF00 != mode:
+            raise ParameterError(TYPE_MISMATCH)
+
+    def _registers(self, number: int) -> int:
+        spec = self.table.get(number)
         if spec is None or spec.data_type == TEXT:
             return 1
         return DATA_TYPES[spec.data_type][0]
