@@ -5,8 +5,8 @@ from ros_helpers import RosClient, start_node, stop_node, write_params
 
 
 def test_vlt6000_start_speed_trip_reset_coast(tmp_path):
-    server = make_sim_server({1: 'vlt6000'}, settings={'vlt': {'ramp_up_s': 0.5,
-                                                              'ramp_down_s': 0.5}})
+    ramps = {'ramp_up_s': 0.5, 'ramp_down_s': 0.5}
+    server = make_sim_server({1: 'vlt6000'}, settings={'vlt': ramps})
     server.open_pty()
     server.start()
     params = write_params(tmp_path / 'vlt.yaml', {'port': server.pty_path, 'parity': 'N',
