@@ -20,8 +20,8 @@ from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.protocol import rtu
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.modbus_server import WireTiming
-from drive_bridge.transport.modbus import (
-    LinkSettings, ModbusTransport, PYMODBUS_VERSION, wire_time_s)
+from drive_bridge.transport.factory import make_transport
+from drive_bridge.transport.modbus import LinkSettings, PYMODBUS_VERSION, wire_time_s
 
 
 def frame_bytes(transaction) -> tuple:
@@ -62,7 +62,7 @@ class CountingProfile(DriveProfile):
         return self._count(super().follow_up_plan(results))
 
 
-def bench(baudrate: int, seconds: float) -> dict:
+def bench(baudrate: int, seconds: float, engine: str) -> dict:
     server = make_sim_server({1: 'fc51'}, wire=WireTiming(baudrate, 'E', 1))
     server.open_pty()
     server.start()
@@ -71,7 +71,7 @@ def bench(baudrate: int, seconds: float) -> dict:
     wire_settings = LinkSettings(baudrate=baudrate, parity='E')
     profile = CountingProfile(wire_settings)
     readings = []
-    bus = BusMaster(ModbusTransport(settings),
+    bus = BusMaster(make_transport(settings, engine),
                     [DeviceSpec('conv', 1, profile, poll_rate_hz=100.0)],
                     BusTiming(frame_gap_s=rtu.frame_gap_s(baudrate, 'E', 1)),
                     listener=lambda event: readings.append(event.kind == 'reading'))
@@ -96,10 +96,12 @@ def main() -> None:
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 5.0
     print(f'pymodbus {PYMODBUS_VERSION}; 1 simulated FC 51 running, 8E1 wire, '
           f'{seconds:g} s per case')
-    print('baud   cycle ms  tx/cycle  wire-time ms/cycle  fraction  cycles/s')
-    for baudrate in (9600, 19200):
-        result = bench(baudrate, seconds)
-        print(f'{baudrate:5d}  {result["cycle_ms"]:8.1f}  {result["tx_per_cycle"]:8.2f}  '
+    print('engine    baud   cycle ms  tx/cycle  wire-time ms/cycle  fraction  cycles/s')
+    for baudrate, engine in ((9600, 'native'), (9600, 'pymodbus'), (19200, 'native'),
+                             (19200, 'pymodbus')):
+        result = bench(baudrate, seconds, engine)
+        print(f'{engine:8s}  {baudrate:5d}  {result["cycle_ms"]:8.1f}  '
+              f'{result["tx_per_cycle"]:8.2f}  '
               f'{result["wire_ms"]:18.1f}  {result["wire_ms"] / result["cycle_ms"]:7.1%}  '
               f'{1000 / result["cycle_ms"]:8.1f}')
 

@@ -14,7 +14,8 @@ from drive_bridge.bus.master import BusTiming, DeviceSpec
 from drive_bridge.devices.registry import FAMILIES, PLANNED_FAMILIES
 from drive_bridge.errors import ConfigError
 from drive_bridge.protocol import rtu
-from drive_bridge.transport.modbus import LinkSettings
+from drive_bridge.transport.factory import SERIAL_ENGINES
+from drive_bridge.transport.link import LinkSettings
 
 PROTOCOLS = ('modbus_rtu', 'ap_ascii', 'modbus_tcp', 'rtu_over_tcp')
 IMPLEMENTED_PROTOCOLS = ('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp')
@@ -78,6 +79,9 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
     Setting('local_echo', bool, False, 'the RS-485 adapter echoes what it sends'),
     Setting('diagnostics_period', float, 1.0, 'seconds between /diagnostics messages',
             low=0.1, high=60.0),
+    Setting('serial_engine', str, 'native',
+            'Modbus RTU on a serial port: native (reads replies by their length) or pymodbus',
+            choices=SERIAL_ENGINES),
 )
 
 DEVICE_SETTINGS: Tuple[Setting, ...] = (
@@ -154,6 +158,7 @@ class BridgeConfig:
     timing: BusTiming
     devices: List[DeviceConfig] = field(default_factory=list)
     diagnostics_period_s: float = 1.0
+    serial_engine: str = 'native'
 
 
 def check_value(setting: Setting, value: Any, label: str) -> Any:
@@ -220,7 +225,7 @@ def build_config(bus_values: Dict[str, Any], device_values: Dict[str, Dict[str, 
     timing = BusTiming(retries=bus['retries'], offline_after=bus['offline_after'],
                        backoff_initial_s=min(1.0, bus['backoff_max']),
                        backoff_max_s=bus['backoff_max'], frame_gap_s=gap)
-    return BridgeConfig(link, timing, devices, bus['diagnostics_period'])
+    return BridgeConfig(link, timing, devices, bus['diagnostics_period'], bus['serial_engine'])
 
 
 def _checked_names(names: List[str]) -> List[str]:

@@ -114,6 +114,69 @@ def decode_request(buffer: bytes, gap_elapsed: bool = False) -> DecodeResult:
     return DecodeResult(frame=frame, consumed=length)
 
 
+# Responses whose length is fixed: unit + function + 4 data bytes (echo) + CRC.
+_ECHO_RESPONSES = {WRITE_SINGLE_COIL, WRITE_SINGLE_REGISTER, WRITE_MULTIPLE_COILS,
+                   WRITE_MULTIPLE_REGISTERS}
+# Responses with a byte count at offset 2: unit fc count data crc(2).
+_COUNTED_RESPONSES = {READ_COILS, 0x02, READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS}
+MIN_RESPONSE_BYTES = 5  # the shortest response: an exception (unit fc code crc crc)
+
+
+@dataclass(frozen=True)
+class ResponseResult:
+    """
+    What the response decoder made of the bytes received so far.
+
+    ``frame`` when the response is complete and valid; ``error`` when the bytes cannot be
+    the response to the request; otherwise ``needed``: how many bytes the whole response
+    takes, as far as the bytes so far tell (read up to it, then ask again).
+    """
+
+    frame: Optional[RtuFrame] = None
+    error: str = ''
+    needed: int = MIN_RESPONSE_BYTES
+
+
+def response_length(buffer: bytes) -> Optional[int]:
+    """Return the length of the response at ``buffer[0]``, or None if not known yet."""
+    if len(buffer) < 2:
+        return None
+    function = buffer[1]
+    if function & 0x80:
+        return 5
+    if function in _ECHO_RESPONSES:
+        return 8
+    if function in _COUNTED_RESPONSES:
+        return 5 + buffer[2] if len(buffer) >= 3 else None
+    return None
+
+
+def decode_response(buffer: bytes, unit: int, function: int) -> ResponseResult:
+    """
+    Decode the response of ``unit`` to a request with ``function`` from ``buffer``.
+
+    Never raises: a wrong address or function, an unknown function or a CRC error is
+    an ``error``; too few bytes is "need more" (``needed``).
+    """
+    if len(buffer) >= 1 and buffer[0] != unit:
+        return ResponseResult(error=f'reply from address {buffer[0]}, expected {unit}')
+    if len(buffer) >= 2 and buffer[1] & 0x7F != function:
+        return ResponseResult(error=f'reply with function {buffer[1]:02X}h to a '
+                                    f'{function:02X}h request')
+    length = response_length(buffer)
+    if length is None:
+        return ResponseResult(needed=max(len(buffer) + 1, 3))
+    if len(buffer) < length:
+        return ResponseResult(needed=length)
+    candidate = bytes(buffer[:length])
+    if len(buffer) > length:
+        return ResponseResult(error=f'{len(buffer) - length} bytes after the reply')
+    if not crc_ok(candidate):
+        return ResponseResult(error='CRC error')
+    return ResponseResult(frame=RtuFrame(candidate[0], candidate[1], candidate[2:-2]),
+                          needed=length)
+
+
 def read_registers_request(unit: int, address: int, count: int) -> RtuFrame:
     """Return a function 03 request for ``count`` registers from frame address ``address``."""
     return RtuFrame(unit, READ_HOLDING_REGISTERS, struct.pack('>HH', address, count))
@@ -122,6 +185,12 @@ def read_registers_request(unit: int, address: int, count: int) -> RtuFrame:
 def write_register_request(unit: int, address: int, value: int) -> RtuFrame:
     """Return a function 06 request writing ``value`` at frame address ``address``."""
     return RtuFrame(unit, WRITE_SINGLE_REGISTER, struct.pack('>HH', address, value))
+
+
+def write_coil_request(unit: int, address: int, value: bool) -> RtuFrame:
+    """Return a function 05 request: FF00h for on, 0000h for off."""
+    return RtuFrame(unit, WRITE_SINGLE_COIL, struct.pack('>HH', address,
+                                                         0xFF00 if value else 0))
 
 
 def read_coils_request(unit: int, address: int, count: int) -> RtuFrame:

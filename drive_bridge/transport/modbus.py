@@ -8,16 +8,15 @@ bus owns the retry policy. Failures are raised as the typed errors of
 :mod:`drive_bridge.errors`, classified by kind for the statistics.
 """
 
-from dataclasses import dataclass
 import inspect
 import logging
-import os
 from typing import List, Optional
 
 from drive_bridge.devices.base import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
-from drive_bridge.protocol import rtu
+from drive_bridge.transport.link import (  # noqa: F401 - LinkSettings, wire_time_s re-exported
+    LinkSettings, open_hint, port_missing, wire_time_s)
 import pymodbus
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -38,40 +37,6 @@ _HAS_TRACE_PACKET = 'trace_packet' in inspect.signature(ModbusSerialClient.__ini
 _GATEWAY_EXCEPTIONS = {0x0A: 'gateway path unavailable', 0x0B: 'gateway target did not respond'}
 
 RECEIVE_POLL_INTERVAL_S = 0.0005
-SERIAL_PROTOCOLS = ('modbus_rtu',)
-TCP_PROTOCOLS = ('modbus_tcp', 'rtu_over_tcp')
-
-
-@dataclass
-class LinkSettings:
-    """Where the bus is and how its bytes are framed; times in seconds."""
-
-    protocol: str = 'modbus_rtu'
-    port: str = '/dev/ttyUSB0'
-    host: str = '127.0.0.1'
-    tcp_port: int = 502
-    baudrate: int = 9600
-    parity: str = 'E'
-    stopbits: int = 0  # 0 = Modbus standard: 2 with no parity, 1 with parity
-    timeout_s: float = 0.5
-    local_echo: bool = False
-
-    @property
-    def effective_stopbits(self) -> int:
-        """Return the stop bits in use (resolving 0 to the Modbus standard)."""
-        return self.stopbits or rtu.default_stopbits(self.parity)
-
-    @property
-    def is_serial(self) -> bool:
-        """Return whether the bus is a local serial port."""
-        return self.protocol in SERIAL_PROTOCOLS
-
-    def describe(self) -> str:
-        """Return the link in words, for messages."""
-        if self.is_serial:
-            return (f'{self.port} {self.baudrate} {self.parity}'
-                    f'{self.effective_stopbits}')
-        return f'{self.protocol} {self.host}:{self.tcp_port}'
 
 
 class ModbusTransport:
@@ -92,8 +57,7 @@ class ModbusTransport:
         """Open the port or connection; raise LinkDown with the reason in words."""
         self.close()
         settings = self.settings
-        if settings.is_serial and not settings.port.startswith(('socket://', 'rfc2217://')) \
-                and not os.path.exists(settings.port):
+        if port_missing(settings):
             raise LinkDown(f'bus offline: {settings.port} not found')
         client = self._make_client()
         try:
@@ -103,21 +67,13 @@ class ModbusTransport:
         if not ok:
             client.close()
             raise LinkDown(f'bus offline: cannot open {settings.describe()}'
-                           + self._open_hint())
+                           + open_hint(settings))
         if hasattr(client, '_recv_interval'):
             # pymodbus >= 3.10 polls the port every 4 characters and ends a read when a poll
             # sees no new byte, which adds up to 8 character times to every reply. Its
             # framer joins partial reads, so a short poll interval is safe and near exact.
             client._recv_interval = RECEIVE_POLL_INTERVAL_S
         self._client = client
-
-    def _open_hint(self) -> str:
-        settings = self.settings
-        if settings.is_serial and not os.access(settings.port, os.R_OK | os.W_OK):
-            return ' (permission denied: add the user to the dialout group)'
-        if settings.is_serial and settings.parity != 'N' and '/pts/' in settings.port:
-            return ' (a pty accepts parity N only)'
-        return ''
 
     def _make_client(self):
         settings = self.settings
@@ -254,8 +210,7 @@ class ModbusTransport:
                            f'{address}/{count}')
 
     def _classify_io_error(self, text: str):
-        if self.settings.is_serial and not self.settings.port.startswith('socket://') \
-                and not os.path.exists(self.settings.port):
+        if port_missing(self.settings):
             self.close()
             return LinkDown(f'bus offline: {self.settings.port} not found')
         timeout = f'{self.settings.timeout_s:g} s'
@@ -263,11 +218,3 @@ class ModbusTransport:
             return BadFrame(f'invalid reply (CRC error, garbage or wrong address), '
                             f'{len(self._received)} bytes received')
         return NoResponse(f'no reply within {timeout}')
-
-
-def wire_time_s(settings: LinkSettings, request_bytes: int, reply_bytes: int) -> float:
-    """Return the minimum time one RTU transaction occupies the line, gaps included."""
-    char_s = rtu.character_time_s(settings.baudrate, settings.parity,
-                                  settings.effective_stopbits)
-    gap_s = rtu.frame_gap_s(settings.baudrate, settings.parity, settings.effective_stopbits)
-    return (request_bytes + reply_bytes) * char_s + 2 * gap_s

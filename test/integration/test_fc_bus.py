@@ -8,6 +8,7 @@ from drive_bridge.devices.base import (
 from drive_bridge.errors import CommandRefused, DeviceException
 from drive_bridge.protocol import words
 from drive_bridge.sim.devices import make_sim_server
+from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from integration_helpers import wait_until
 import pytest
@@ -24,9 +25,10 @@ def sim():
     server.stop()
 
 
-@pytest.fixture
-def transport(sim):
-    transport = ModbusTransport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=0.2))
+@pytest.fixture(params=SERIAL_ENGINES)
+def transport(sim, request):
+    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=0.2),
+                               request.param)
     transport.connect()
     yield transport
     transport.close()

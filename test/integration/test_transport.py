@@ -1,25 +1,27 @@
-"""pymodbus (pinned and 3.6.9) against the simulated MCD module: every protocol path."""
+"""Both serial engines (native, pymodbus pinned and 3.6.9) against the simulated MCD module."""
 
 import time
 
 from drive_bridge.devices.base import ReadRegisters, WriteRegister
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
 from drive_bridge.sim.mcd_device import make_mcd_server as make_server
-from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
+from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
+from drive_bridge.transport.modbus import LinkSettings
 import pytest
 
 MCD500_PRODUCT = (7 << 3) | 1
 
 
-def transport_for(settings):
-    transport = ModbusTransport(settings)
+def transport_for(settings, engine='pymodbus'):
+    transport = make_transport(settings, engine)
     transport.connect()
     return transport
 
 
-@pytest.fixture
-def pty_transport(sim_bus):
-    transport = transport_for(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.2))
+@pytest.fixture(params=SERIAL_ENGINES)
+def pty_transport(sim_bus, request):
+    transport = transport_for(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.2),
+                              request.param)
     yield transport
     transport.close()
 
@@ -68,10 +70,27 @@ def test_corrupted_reply_is_a_bad_frame(pty_transport, sim_bus):
     assert pty_transport.execute(20, ReadRegisters(2, 6))
 
 
-def test_missing_port_is_link_down_with_its_name():
-    transport = ModbusTransport(LinkSettings(port='/dev/ttyDOESNOTEXIST'))
+@pytest.mark.parametrize('engine', SERIAL_ENGINES)
+def test_missing_port_is_link_down_with_its_name(engine):
+    transport = make_transport(LinkSettings(port='/dev/ttyDOESNOTEXIST'), engine)
     with pytest.raises(LinkDown, match='bus offline: /dev/ttyDOESNOTEXIST not found'):
         transport.connect()
+
+
+def test_native_engine_garbage_wrong_address_and_truncation(sim_bus):
+    transport = transport_for(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.2),
+                              'native')
+    try:
+        for hook, text in ((lambda unit, data: b'\x15' + data[1:], 'reply from address 21'),
+                           (lambda unit, data: data[:6], 'truncated reply: 6 of 17 bytes'),
+                           (lambda unit, data: b'\xff\xff\xff', 'reply from address 255')):
+            sim_bus.reply_hook = hook
+            with pytest.raises(BadFrame, match=text):
+                transport.execute(20, ReadRegisters(2, 6))
+        sim_bus.reply_hook = None
+        assert transport.execute(20, ReadRegisters(2, 6))[4] == MCD500_PRODUCT
+    finally:
+        transport.close()
 
 
 @pytest.mark.parametrize('framing, protocol', [('mbap', 'modbus_tcp'),
@@ -91,8 +110,9 @@ def test_tcp_protocols(framing, protocol):
         server.stop()
 
 
+@pytest.mark.parametrize('engine', SERIAL_ENGINES)
 @pytest.mark.parametrize('parity', ['E', 'O'])
-def test_even_and_odd_parity_serial_settings_over_socket_url(parity):
+def test_even_and_odd_parity_serial_settings_over_socket_url(parity, engine):
     # A pty rejects parity E/O; pyserial's socket:// carries the serial client's settings
     # to an RTU-over-TCP server instead.
     server = make_server({20: 'mcd500'})
@@ -100,7 +120,7 @@ def test_even_and_odd_parity_serial_settings_over_socket_url(parity):
     server.start()
     try:
         transport = transport_for(LinkSettings(port=f'socket://127.0.0.1:{port}',
-                                               parity=parity, timeout_s=0.3))
+                                               parity=parity, timeout_s=0.3), engine)
         assert transport.settings.effective_stopbits == 1
         assert transport.execute(20, ReadRegisters(2, 6))[4] == MCD500_PRODUCT
         transport.close()

@@ -108,3 +108,34 @@ def test_fc_actual_value_decodes_signed():
     assert fc_scaling.word_to_percent(0x4000) == 100.0
     assert fc_scaling.word_to_percent(0xC000) == -100.0
     assert fc_scaling.word_to_percent(0x1999) == pytest.approx(39.996, abs=1e-3)
+
+
+def test_decode_response_needs_more_bytes_until_the_reply_is_whole():
+    # The VLT option card manual's reply to "start at 40 %": 01 0F 00 00 00 20 54 13.
+    reply = hexbytes('01 0F 00 00 00 20 54 13')
+    for cut in range(len(reply)):
+        result = rtu.decode_response(reply[:cut], 1, 0x0F)
+        assert result.frame is None and not result.error and result.needed > cut
+    expected = rtu.RtuFrame(1, 0x0F, hexbytes('00 00 00 20'))
+    assert rtu.decode_response(reply, 1, 0x0F).frame == expected
+    registers = rtu.registers_response(20, 3, [1, 2, 3]).encode()
+    assert rtu.decode_response(registers[:3], 20, 3).needed == len(registers)
+    assert rtu.decode_response(registers, 20, 3).frame.data == hexbytes('06 00 01 00 02 00 03')
+
+
+def test_decode_response_errors():
+    exception = rtu.exception_response(20, 6, 9).encode()
+    assert rtu.decode_response(exception, 20, 6).frame.function == 0x86
+    assert 'address 21' in rtu.decode_response(rtu.exception_response(21, 6, 9).encode(),
+                                               20, 6).error
+    assert 'function 83h' in rtu.decode_response(rtu.exception_response(20, 3, 2).encode(),
+                                                 20, 6).error
+    corrupted = exception[:-1] + bytes([exception[-1] ^ 1])
+    assert rtu.decode_response(corrupted, 20, 6).error == 'CRC error'
+    assert 'after the reply' in rtu.decode_response(exception + b'\x00', 20, 6).error
+
+
+def test_request_builders_of_the_manuals():
+    assert rtu.write_coil_request(1, 64, True).encode()[:6] == hexbytes('01 05 00 40 FF 00')
+    assert rtu.read_coils_request(1, 32, 32).encode()[:6] == hexbytes('01 01 00 20 00 20')
+    assert rtu.pack_coils([True] + [False] * 7 + [True]) == hexbytes('01 01')

@@ -1,0 +1,179 @@
+"""
+Modbus RTU master on a serial port through pyserial, reading replies by their expected length.
+
+The reply's length follows from its first bytes (:func:`drive_bridge.protocol.rtu.decode_response`,
+a pure decoder with a "need more bytes" contract), so the transport asks the port for exactly
+the bytes still missing and returns the moment the last one arrives: no inter-character
+polling, no end-of-frame guessing (as libmodbus does). This is the default engine for
+``protocol: modbus_rtu``; ``serial_engine: pymodbus`` selects pymodbus's serial client instead.
+Failures are the typed errors of :mod:`drive_bridge.errors`.
+"""
+
+import time
+from typing import Callable, Dict, List, Optional
+
+from drive_bridge.devices.base import (
+    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
+from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.protocol import rtu
+from drive_bridge.protocol.rtu import RtuFrame
+from drive_bridge.transport.link import LinkSettings, open_hint, port_missing
+import serial
+
+_PARITY = {'N': serial.PARITY_NONE, 'E': serial.PARITY_EVEN, 'O': serial.PARITY_ODD}
+_STOPBITS = {1: serial.STOPBITS_ONE, 2: serial.STOPBITS_TWO}
+
+
+def _request(unit: int, transaction) -> RtuFrame:
+    """Return the request frame of one transaction."""
+    if isinstance(transaction, ReadRegisters):
+        return rtu.read_registers_request(unit, transaction.address, transaction.count)
+    if isinstance(transaction, ReadCoils):
+        return rtu.read_coils_request(unit, transaction.address, transaction.count)
+    if isinstance(transaction, WriteRegister):
+        return rtu.write_register_request(unit, transaction.address, transaction.value)
+    if isinstance(transaction, WriteCoil):
+        return rtu.write_coil_request(unit, transaction.address, transaction.value)
+    if isinstance(transaction, WriteRegisters):
+        return rtu.write_registers_request(unit, transaction.address, list(transaction.values))
+    if isinstance(transaction, WriteCoils):
+        return rtu.write_coils_request(unit, transaction.address, list(transaction.values))
+    raise TypeError(f'unsupported transaction {transaction!r}')
+
+
+def _registers(transaction: ReadRegisters, reply: RtuFrame) -> List[int]:
+    data = reply.data
+    if not data or data[0] != len(data) - 1 or data[0] % 2:
+        raise BadFrame(f'register reply with byte count {data[:1].hex()} and '
+                       f'{len(data) - 1} data bytes')
+    registers = [int.from_bytes(data[i:i + 2], 'big') for i in range(1, len(data), 2)]
+    if len(registers) != transaction.count and \
+            (transaction.exact or not 0 < len(registers) <= transaction.count):
+        raise BadFrame(f'expected {transaction.count} registers, got {len(registers)}')
+    return registers
+
+
+def _coils(transaction: ReadCoils, reply: RtuFrame) -> List[bool]:
+    data = reply.data
+    if not data or data[0] != len(data) - 1 or data[0] * 8 < transaction.count:
+        raise BadFrame(f'expected {transaction.count} coils, got {len(data) - 1} data bytes')
+    return [bool(data[1 + i // 8] >> (i % 8) & 1) for i in range(transaction.count)]
+
+
+_PARSERS: Dict[type, Callable] = {ReadRegisters: _registers, ReadCoils: _coils}
+
+
+class RtuSerialTransport:
+    """Run single Modbus RTU transactions on a serial port; the bus thread owns it."""
+
+    def __init__(self, settings: LinkSettings,
+                 open_port: Callable[..., object] = serial.serial_for_url):
+        self.settings = settings
+        self._open_port = open_port
+        self._port = None
+
+    @property
+    def connected(self) -> bool:
+        """Return whether the port is open."""
+        return self._port is not None
+
+    def connect(self) -> None:
+        """Open the port; raise LinkDown with the reason in words."""
+        self.close()
+        settings = self.settings
+        if port_missing(settings):
+            raise LinkDown(f'bus offline: {settings.port} not found')
+        try:
+            self._port = self._open_port(
+                settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
+                parity=_PARITY[settings.parity],
+                stopbits=_STOPBITS[settings.effective_stopbits], timeout=settings.timeout_s)
+        except (serial.SerialException, OSError, ValueError) as error:
+            raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}'
+                           + open_hint(settings)) from error
+
+    def close(self) -> None:
+        """Close the port (idempotent)."""
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except (serial.SerialException, OSError):
+                pass
+
+    def execute(self, unit: int, transaction) -> Optional[list]:
+        """Run one transaction with device ``unit``; return registers or coils read, or None."""
+        if self._port is None:
+            raise LinkDown('bus offline: not connected')
+        request = _request(unit, transaction)
+        try:
+            reply = self._exchange(request)
+        except (serial.SerialException, OSError) as error:
+            self.close()
+            if port_missing(self.settings):
+                raise LinkDown(f'bus offline: {self.settings.port} not found') from error
+            raise LinkDown(f'bus offline: {self.settings.describe()}: {error}') from error
+        if reply.function & 0x80:
+            raise DeviceException(reply.data[0])
+        parser = _PARSERS.get(type(transaction))
+        if parser is not None:
+            return parser(transaction, reply)
+        if reply.data[:4] != request.data[:4]:  # 05/06 echo, 0F/10 address + quantity
+            raise BadFrame(f'write reply {reply.data[:4].hex(" ")} does not match the request '
+                           f'{request.data[:4].hex(" ")}')
+        return None
+
+    def _exchange(self, request: RtuFrame) -> RtuFrame:
+        port = self._port
+        port.reset_input_buffer()  # a late reply to an earlier request must not count
+        encoded = request.encode()
+        port.write(encoded)
+        if self.settings.local_echo:
+            echo = self._read_exactly(len(encoded), time.monotonic() + self.settings.timeout_s)
+            if echo != encoded:
+                raise BadFrame('the adapter did not echo the request (local_echo is set)')
+        return self._receive(request.unit, request.function)
+
+    def _receive(self, unit: int, function: int) -> RtuFrame:
+        deadline = time.monotonic() + self.settings.timeout_s
+        buffer = b''
+        needed = rtu.MIN_RESPONSE_BYTES
+        while True:
+            buffer += self._read_exactly(needed - len(buffer), deadline)
+            result = rtu.decode_response(buffer, unit, function)
+            if result.frame is not None:
+                return result.frame
+            if result.error:
+                self._drain()
+                raise BadFrame(f'invalid reply ({result.error}), {len(buffer)} bytes received')
+            if len(buffer) < needed:  # the deadline passed
+                if not buffer:
+                    raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
+                raise BadFrame(f'truncated reply: {len(buffer)} of {needed} bytes within '
+                               f'{self.settings.timeout_s:g} s')
+            needed = result.needed
+
+    def _read_exactly(self, count: int, deadline: float) -> bytes:
+        """Read up to ``count`` bytes, returning early only when the deadline passes."""
+        port = self._port
+        data = b''
+        while len(data) < count:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            if port.timeout != remaining:
+                port.timeout = remaining
+            chunk = port.read(count - len(data))
+            if not chunk:
+                break
+            data += chunk
+        return data
+
+    def _drain(self) -> None:
+        """Drop what is still arriving after a bad reply (one character-gap of silence)."""
+        port = self._port
+        gap = max(0.005, rtu.frame_gap_s(self.settings.baudrate, self.settings.parity,
+                                         self.settings.effective_stopbits))
+        port.timeout = gap
+        while port.read(256):
+            pass
