@@ -14,11 +14,11 @@ from drive_bridge.bus.master import BusTiming, DeviceSpec
 from drive_bridge.devices.registry import FAMILIES, PLANNED_FAMILIES
 from drive_bridge.errors import ConfigError
 from drive_bridge.protocol import rtu
-from drive_bridge.transport.factory import SERIAL_ENGINES
+from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
 from drive_bridge.transport.link import LinkSettings
 
 PROTOCOLS = ('modbus_rtu', 'ap_ascii', 'modbus_tcp', 'rtu_over_tcp')
-IMPLEMENTED_PROTOCOLS = ('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp')
+AP_ASCII_MIN_TIMEOUT_S = 0.25  # the MCD 3000 may take up to 250 ms to answer
 BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
 PARITIES = ('N', 'E', 'O')
 DEVICE_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
@@ -79,6 +79,11 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
     Setting('local_echo', bool, False, 'the RS-485 adapter echoes what it sends'),
     Setting('diagnostics_period', float, 1.0, 'seconds between /diagnostics messages',
             low=0.1, high=60.0),
+    Setting('ap_nak_retries', int, 2,
+            'AP ASCII: how often an exchange answered with NAK (bad LRC, not executed) is '
+            'restarted from the address', low=0, high=10),
+    Setting('ap_address_lrc_eot', bool, True,
+            'AP ASCII: the address fragment LRC includes EOT (the manual leaves it open)'),
     Setting('serial_engine', str, 'native',
             'Modbus RTU on a serial port: native (reads replies by their length) or pymodbus',
             choices=SERIAL_ENGINES),
@@ -135,6 +140,7 @@ class DeviceConfig:
     comms_timeout: float = 0.0
     comms_timeout_function: int = -1
     current_parameter: int = 0
+    protocol: str = 'modbus_rtu'
 
     @property
     def is_drive(self) -> bool:
@@ -159,6 +165,13 @@ class BridgeConfig:
     devices: List[DeviceConfig] = field(default_factory=list)
     diagnostics_period_s: float = 1.0
     serial_engine: str = 'native'
+    ap_nak_retries: int = 2
+    ap_address_lrc_eot: bool = True
+
+    def make_transport(self):
+        """Return the transport of this bus."""
+        return make_transport(self.link, self.serial_engine, self.ap_nak_retries,
+                              self.ap_address_lrc_eot)
 
 
 def check_value(setting: Setting, value: Any, label: str) -> Any:
@@ -206,9 +219,8 @@ def build_config(bus_values: Dict[str, Any], device_values: Dict[str, Dict[str, 
     bus = {setting.name: check_value(setting, bus_values.get(setting.name, setting.default),
                                      setting.name)
            for setting in BUS_SETTINGS}
-    if bus['protocol'] not in IMPLEMENTED_PROTOCOLS:
-        raise ConfigError(f"parameter 'protocol' = {bus['protocol']!r} is not implemented in "
-                          f'this version: allowed {", ".join(IMPLEMENTED_PROTOCOLS)}')
+    if bus['protocol'] == 'ap_ascii':
+        _check_ap_ascii(bus)
     names = bus['devices']
     if not names:
         raise ConfigError("parameter 'devices' is empty: list at least one device name")
@@ -225,7 +237,20 @@ def build_config(bus_values: Dict[str, Any], device_values: Dict[str, Dict[str, 
     timing = BusTiming(retries=bus['retries'], offline_after=bus['offline_after'],
                        backoff_initial_s=min(1.0, bus['backoff_max']),
                        backoff_max_s=bus['backoff_max'], frame_gap_s=gap)
-    return BridgeConfig(link, timing, devices, bus['diagnostics_period'], bus['serial_engine'])
+    return BridgeConfig(link, timing, devices, bus['diagnostics_period'], bus['serial_engine'],
+                        bus['ap_nak_retries'], bus['ap_address_lrc_eot'])
+
+
+def _check_ap_ascii(bus: Dict[str, Any]) -> None:
+    """AP ASCII runs 8N1 (manual 000 section 10) with a timeout the MCD 3000 can meet."""
+    if bus['parity'] != 'N' or bus['stopbits'] not in (0, 1):
+        raise ConfigError(f"parameter 'parity' = {bus['parity']!r}, 'stopbits' = "
+                          f"{bus['stopbits']} do not fit protocol 'ap_ascii': AP ASCII is "
+                          '8N1, set parity: "N" and stopbits: 0 or 1')
+    if bus['timeout'] < AP_ASCII_MIN_TIMEOUT_S:
+        raise ConfigError(f"parameter 'timeout' = {bus['timeout']} is too short for "
+                          f"protocol 'ap_ascii': allowed [{AP_ASCII_MIN_TIMEOUT_S}, 10] (an MCD "
+                          '3000 may take 250 ms to answer)')
 
 
 def _checked_names(names: List[str]) -> List[str]:
@@ -269,7 +294,7 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
     if protocol not in family.protocols:
         raise ConfigError(f'device {name!r} (family {family.name}) cannot run on protocol '
                           f'{protocol!r}: allowed {", ".join(family.protocols)}')
-    device = DeviceConfig(name=name, **checked)
+    device = DeviceConfig(name=name, protocol=protocol, **checked)
     try:
         device.make_spec()  # the profile checks what the tables alone cannot
     except ConfigError as error:

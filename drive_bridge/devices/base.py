@@ -67,7 +67,22 @@ class WriteCoil:
     value: bool
 
 
-WRITES = (WriteRegister, WriteRegisters, WriteCoils, WriteCoil)
+@dataclass(frozen=True)
+class AsciiCommand:
+    """AP ASCII: send command ``code`` (e.g. ``B10``); acknowledged with ACK."""
+
+    code: str
+
+
+@dataclass(frozen=True)
+class AsciiRequest:
+    """AP ASCII: send request ``code`` (e.g. ``C22``); the reply is 'status' or 'data'."""
+
+    code: str
+    reply: str = 'status'
+
+
+WRITES = (WriteRegister, WriteRegisters, WriteCoils, WriteCoil, AsciiCommand)
 Transaction = object  # one of the dataclasses above
 
 

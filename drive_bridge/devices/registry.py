@@ -5,6 +5,7 @@ from typing import Callable, Dict, Tuple
 
 from drive_bridge.devices import fc, mcd, vlt
 from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.mcd_ascii import McdAsciiProfile
 
 
 @dataclass(frozen=True)
@@ -34,8 +35,9 @@ FAMILIES: Dict[str, Family] = {
         name='mcd',
         description='MCD 201/202/500 via the MCD Modbus Module, MCD 3000 via the Remote Operator',
         models=mcd.MODELS, address_range=mcd.ADDRESS_RANGE,
-        protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'), is_drive=False,
-        make_profile=lambda device: mcd.McdProfile(device.model, device.current_scale)),
+        protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'ap_ascii'), is_drive=False,
+        make_profile=lambda device: (McdAsciiProfile if device.protocol == 'ap_ascii'
+                                     else mcd.McdProfile)(device.model, device.current_scale)),
     'fc': Family(
         name='fc', description='VLT Micro Drive FC 51, built-in Modbus RTU',
         models=fc.MODELS, address_range=fc.ADDRESS_RANGE,

@@ -14,7 +14,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusEvent, BusMaster, DeviceSnapshot
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError
-from drive_bridge.transport.factory import make_transport
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 import rclpy
@@ -87,7 +86,7 @@ class DriveBridgeNode(Node):
         self._service_group = ReentrantCallbackGroup()
         self._timer_group = MutuallyExclusiveCallbackGroup()
         specs = [device.make_spec() for device in self.config.devices]
-        transport = make_transport(self.config.link, self.config.serial_engine)
+        transport = self.config.make_transport()
         self.bus = BusMaster(transport, specs, self.config.timing,
                              listener=self._on_bus_event)
         self._guard = self.create_guard_condition(self._publish_events)

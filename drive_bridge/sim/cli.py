@@ -6,10 +6,12 @@ Examples::
     drive_bridge_sim --device mcd500:20 --link /tmp/ttyMCD     # RTU on a pty, 8N2
     drive_bridge_sim --device mcd500:20 --device mcd202:21 --tcp 5020 --framing rtu
     drive_bridge_sim --device fc51:1 --device mcd500:20 --link /tmp/ttyLINE
+    drive_bridge_sim --protocol ap_ascii --device mcd500:20 --device mcd3000:21
 
 With ``--console`` (default when standard input is a terminal) it reads commands:
 ``trip ADDR CODE`` (MCD trip code; FC: alarm word bit, 5 = over current), ``hand ADDR
-on|off`` (MCD Hand On; FC local operation), ``silent ADDR on|off``, ``status``, ``quit``.
+on|off`` (MCD Hand On; FC local operation), ``silent ADDR on|off``, ``fault ADDR
+nak|bel|silence|garbage`` (AP ASCII: the next reply), ``status``, ``quit``.
 """
 
 import argparse
@@ -20,6 +22,7 @@ import time
 from typing import Dict, List, Optional
 
 from drive_bridge.devices import mcd
+from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
 from drive_bridge.sim.devices import make_device, SIM_MODELS
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
@@ -45,6 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='drive_bridge_sim', description=__doc__.split('\n')[0])
     parser.add_argument('--device', action='append', type=parse_device, required=True,
                         metavar='MODEL:ADDRESS', help=f'models: {", ".join(SIM_MODELS)}')
+    parser.add_argument('--protocol', choices=('modbus', 'ap_ascii'), default='modbus',
+                        help='ap_ascii: MCD starters on an AP ASCII line (pty only)')
     parser.add_argument('--link', default='', help='symlink to create for the pty')
     parser.add_argument('--no-pty', action='store_true', help='do not open a pty')
     parser.add_argument('--tcp', type=int, default=None, metavar='PORT',
@@ -69,8 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def build_server(args: argparse.Namespace) -> ModbusSimServer:
-    """Create the devices and the server from parsed arguments."""
+def build_server(args: argparse.Namespace):
+    """Create the devices and the server (Modbus or AP ASCII) from parsed arguments."""
     now = time.monotonic()
     settings = {
         'mcd': {'start_time_s': args.start_time, 'stop_time_s': args.stop_time,
@@ -88,6 +93,11 @@ def build_server(args: argparse.Namespace) -> ModbusSimServer:
     for text in args.trip:
         unit, _, code = text.partition(':')
         _device(devices, int(unit)).model.trip(int(code), now)
+    if args.protocol == 'ap_ascii':
+        if any(SIM_MODELS[model][0] != 'mcd' for model, _ in args.device) or args.tcp \
+                is not None:
+            raise SystemExit('drive_bridge_sim: AP ASCII serves MCD models on a pty only')
+        return ApAsciiSimServer({unit: device.model for unit, device in devices.items()})
     wire = WireTiming(args.wire_baud, args.wire_parity,
                       1 if args.wire_parity != 'N' else 2) if args.wire_baud else None
     return ModbusSimServer(devices, wire=wire)
@@ -97,13 +107,16 @@ def _set_hand(device, on: bool) -> None:
     if isinstance(device, FcSimDevice):
         device.model.local_mode = on
     else:
-        device.model.hand_on = on
+        _model(device).hand_on = on
 
 
 def _device(devices: Dict[int, object], unit: int):
     if unit not in devices:
         raise SystemExit(f'drive_bridge_sim: no device at address {unit}')
     return devices[unit]
+
+
+CONSOLE_COMMANDS = ('status', 'trip', 'hand', 'silent', 'fault')
 
 
 def run_console_command(server: ModbusSimServer, line: str) -> str:
@@ -115,11 +128,13 @@ def run_console_command(server: ModbusSimServer, line: str) -> str:
         return _console(server, words)
     except (ValueError, IndexError, KeyError) as error:
         return f'error: {error}; commands: trip ADDR CODE, hand ADDR on|off, ' \
-               'silent ADDR on|off, status, quit'
+               'silent ADDR on|off, fault ADDR nak|bel|silence|garbage, status, quit'
 
 
 def _console(server: ModbusSimServer, words: List[str]) -> str:
     command = words[0]
+    if command not in CONSOLE_COMMANDS:
+        raise ValueError(f'unknown command {command!r}')
     now = time.monotonic()
     with server.lock:
         if command == 'status':
@@ -128,18 +143,25 @@ def _console(server: ModbusSimServer, words: List[str]) -> str:
         unit = int(words[1])
         device = server.devices[unit]
         if command == 'trip':
-            device.model.trip(int(words[2]), now)
+            _model(device).trip(int(words[2]), now)
         elif command == 'hand':
             _set_hand(device, words[2] == 'on')
         elif command == 'silent':
             (server.silent_units.add if words[2] == 'on' else server.silent_units.discard)(unit)
+        elif command == 'fault' and isinstance(server, ApAsciiSimServer):
+            server.inject(unit, words[2])
         else:
             raise ValueError(f'unknown command {command!r}')
         return _describe(unit, device, now)
 
 
+def _model(device):
+    """Return the behaviour model of a simulated device (AP ASCII serves models directly)."""
+    return getattr(device, 'model', device)
+
+
 def _describe(unit: int, device, now: float) -> str:
-    model = device.model
+    model = _model(device)
     model.advance(now)
     if isinstance(device, FcSimDevice):
         return (f'{unit}: {model.config.model} output {model.output_pct:.1f} % current '
@@ -160,7 +182,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'pty: {server.open_pty(args.link)}', flush=True)
         if args.link:
             print(f'link: {args.link}', flush=True)
-    if args.tcp is not None:
+    if args.tcp is not None and isinstance(server, ModbusSimServer):
         print(f'tcp: {args.host}:{server.open_tcp(args.host, args.tcp, args.framing)} '
               f'({args.framing})', flush=True)
     server.start()

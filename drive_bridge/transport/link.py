@@ -26,7 +26,9 @@ class LinkSettings:
 
     @property
     def effective_stopbits(self) -> int:
-        """Return the stop bits in use (resolving 0 to the Modbus standard)."""
+        """Return the stop bits in use (0: the Modbus standard; AP ASCII is always 8N1)."""
+        if self.protocol == 'ap_ascii':
+            return 1
         return self.stopbits or rtu.default_stopbits(self.parity)
 
     @property

@@ -51,7 +51,11 @@ def test_int_is_accepted_for_a_double():
     ({'parity': False}, {}, 'write parity: "N" with quotes'),
     ({'parity': 'X'}, {}, "parameter 'parity' = 'X' is invalid: allowed N, E, O"),
     ({'baudrate': 9601}, {}, "parameter 'baudrate' = 9601 is invalid"),
-    ({'protocol': 'ap_ascii'}, {}, "'protocol' = 'ap_ascii' is not implemented in this version"),
+    ({'protocol': 'ap_ascii'}, {}, "do not fit protocol 'ap_ascii': AP ASCII is 8N1"),
+    ({'protocol': 'ap_ascii', 'parity': 'N', 'timeout': 0.1}, {},
+     "parameter 'timeout' = 0.1 is too short for protocol 'ap_ascii'"),
+    ({'protocol': 'ap_ascii', 'parity': 'N'}, {'family': 'fc', 'model': 'auto'},
+     "device 'starter' (family fc) cannot run on protocol 'ap_ascii'"),
     ({'protocol': 'canopen'}, {}, "parameter 'protocol' = 'canopen' is invalid"),
     ({'timeout': 0.0}, {}, "parameter 'timeout' = 0.0 is out of range"),
 ])

@@ -1,0 +1,200 @@
+"""
+AP ASCII, the MCD soft starters' own serial protocol: fragments, LRC, status and data digits.
+
+Pure. Sources: MCD Modbus Module manual ``000_b701c31669ff8873.txt`` section 10 (fragments,
+commands B10-B18, requests C18/C22/D10/D12, LRC), its second extraction
+``001_9e78dc5acbafdd65.txt`` (the worked LRC and how to verify one) and
+``shared/research/protocols.md`` (exchange sequence, address LRC, status digit encodings).
+
+Exchanges: command = master ``EOT nn lrc ENQ``, slave ``ACK``, master ``STX Bxx lrc ETX``,
+slave ``ACK``; request = the same address fragment and ``ACK``, then ``STX Cxx|Dxx lrc ETX``,
+slave ``STX dddd lrc ETX``. A slave answers a bad LRC with NAK and a refused command with BEL;
+an unknown address never answers.
+"""
+
+from dataclasses import dataclass
+from typing import Optional
+
+STX, ETX, EOT, ENQ, ACK, NAK, BEL = 0x02, 0x03, 0x04, 0x05, 0x06, 0x15, 0x07
+SINGLE_BYTE_REPLIES = {ACK: 'ACK', NAK: 'NAK', BEL: 'BEL'}
+FRAME_BYTES = 8  # STX d d d d lrc lrc ETX
+ADDRESS_RANGE = (1, 99)  # two decimal digits
+
+# Section 10.1: commands.
+COMMANDS = {'start': 'B10', 'stop': 'B12', 'reset': 'B14', 'quick_stop': 'B16',
+            'forced_comms_trip': 'B18'}
+# Sections 10.2 and 10.3: requests and what their reply carries.
+REQUESTS = {'trip_code': ('C18', 'status'), 'status': ('C22', 'status'),
+            'motor_current': ('D10', 'data'), 'motor_temperature': ('D12', 'data')}
+
+
+def lrc(data: bytes) -> int:
+    """Return the LRC of ``data``: the two's complement of the byte sum, mod 256."""
+    return (-sum(data)) & 0xFF
+
+
+def lrc_ascii(data: bytes) -> bytes:
+    """Return the LRC of ``data`` as two upper-case ASCII hex characters."""
+    return b'%02X' % lrc(data)
+
+
+def address_fragment(address: int, lrc_includes_eot: bool = True) -> bytes:
+    """
+    Return ``EOT nn lrc ENQ`` for ``address`` (01-99).
+
+    Whether the address LRC covers EOT is not in the manual (protocols.md: inferred yes).
+    """
+    if not ADDRESS_RANGE[0] <= address <= ADDRESS_RANGE[1]:
+        raise ValueError(f'AP ASCII address {address} is out of range 1-99')
+    digits = b'%02d' % address
+    checked = bytes([EOT]) + digits if lrc_includes_eot else digits
+    return bytes([EOT]) + digits + lrc_ascii(checked) + bytes([ENQ])
+
+
+def message_fragment(code: str) -> bytes:
+    """Return ``STX ccc lrc ETX`` for a command or request code such as ``B10``."""
+    body = bytes([STX]) + code.encode('ascii')
+    return body + lrc_ascii(body) + bytes([ETX])
+
+
+def data_fragment(digits: bytes) -> bytes:
+    """Return ``STX dddd lrc ETX`` (a slave's reply) for four ASCII digits."""
+    body = bytes([STX]) + digits
+    return body + lrc_ascii(body) + bytes([ETX])
+
+
+def lrc_matches(body: bytes, lrc_text: bytes) -> bool:
+    """
+    Verify a received LRC (001, "To verify a received message"): body plus LRC sums to 0.
+
+    ``body`` starts with STX or EOT; the LRC is accepted computed with or without that
+    first byte, since the manuals leave it open for addresses.
+    """
+    try:
+        value = int(lrc_text.decode('ascii'), 16)
+    except (UnicodeDecodeError, ValueError):
+        return False
+    if len(lrc_text) != 2:
+        return False
+    return (sum(body) + value) & 0xFF == 0 or (sum(body[1:]) + value) & 0xFF == 0
+
+
+def encode_status(value: int, style: str = 'hex') -> bytes:
+    """
+    Return the four status digits of byte ``value``: ``00`` then the two nibbles.
+
+    ``style`` 'hex' sends nibbles as ASCII hex (the manual's example: 1Fh -> ``001F``);
+    'offset' as 30h + nibble (the manual's text: 1Fh -> ``001?``).
+    """
+    high, low = value >> 4 & 0x0F, value & 0x0F
+    if style == 'offset':
+        return bytes([0x30, 0x30, 0x30 + high, 0x30 + low])
+    return b'00%X%X' % (high, low)
+
+
+def decode_status(digits: bytes) -> int:
+    """Return the status byte of four status digits, accepting both nibble encodings."""
+    if len(digits) != 4 or digits[:2] != b'00':
+        raise ValueError(f'status digits {digits!r} do not start with 00')
+    return _nibble(digits[2]) << 4 | _nibble(digits[3])
+
+
+def _nibble(char: int) -> int:
+    if 0x30 <= char <= 0x3F:  # '0'-'9', and 30h + 10..15 (':' ... '?')
+        return char - 0x30
+    if 0x41 <= char <= 0x46:  # 'A'-'F'
+        return char - 0x41 + 10
+    raise ValueError(f'{bytes([char])!r} is not a status nibble')
+
+
+def encode_data(value: int) -> bytes:
+    """Return four decimal digits (0000-9999) for a data reply."""
+    if not 0 <= value <= 9999:
+        raise ValueError(f'data value {value} does not fit 4 decimal digits')
+    return b'%04d' % value
+
+
+def decode_data(digits: bytes) -> int:
+    """Return the value of four decimal digits."""
+    if len(digits) != 4 or not digits.isdigit():
+        raise ValueError(f'data digits {digits!r} are not 4 decimal digits')
+    return int(digits)
+
+
+@dataclass(frozen=True)
+class Reply:
+    """
+    What the reply decoder made of the bytes received so far.
+
+    ``kind`` is 'ACK', 'NAK', 'BEL', 'frame' (``digits`` set) or 'error' (``error`` set);
+    '' means "need more bytes" (``needed`` in all).
+    """
+
+    kind: str = ''
+    digits: bytes = b''
+    error: str = ''
+    needed: int = 1
+
+
+def decode_reply(buffer: bytes) -> Reply:
+    """Decode one slave reply from the start of ``buffer``; never raises."""
+    if not buffer:
+        return Reply(needed=1)
+    first = buffer[0]
+    if first in SINGLE_BYTE_REPLIES:
+        if len(buffer) > 1:
+            return Reply(kind='error', error=f'{len(buffer) - 1} bytes after '
+                                             f'{SINGLE_BYTE_REPLIES[first]}')
+        return Reply(kind=SINGLE_BYTE_REPLIES[first])
+    if first != STX:
+        return Reply(kind='error', error=f'reply starts with {first:02X}h')
+    if len(buffer) < FRAME_BYTES:
+        return Reply(needed=FRAME_BYTES)
+    frame = buffer[:FRAME_BYTES]
+    if len(buffer) > FRAME_BYTES or frame[-1] != ETX:
+        return Reply(kind='error', error='reply is not STX dddd lrc ETX')
+    if not lrc_matches(frame[:5], frame[5:7]):
+        return Reply(kind='error', error='LRC error in the reply')
+    return Reply(kind='frame', digits=bytes(frame[1:5]), needed=FRAME_BYTES)
+
+
+@dataclass(frozen=True)
+class Fragment:
+    """One master fragment as a slave decodes it: 'address' (``address``) or 'message'."""
+
+    kind: str
+    address: Optional[int] = None
+    code: str = ''
+    lrc_ok: bool = True
+
+
+def decode_fragment(buffer: bytes, lrc_includes_eot: Optional[bool] = None) -> tuple:
+    """
+    Decode one master fragment for a slave: return (Fragment or None, bytes consumed).
+
+    (None, 0) means "need more bytes"; (None, n) drops n bytes of garbage.
+    """
+    if not buffer:
+        return None, 0
+    first = buffer[0]
+    if first == EOT:
+        if len(buffer) < 6:
+            return None, 0
+        digits, lrc_text, end = buffer[1:3], buffer[3:5], buffer[5]
+        if end != ENQ or not digits.isdigit():
+            return None, 1
+        body = bytes([EOT]) + digits
+        if lrc_includes_eot is None:
+            ok = lrc_matches(body, lrc_text)
+        else:
+            ok = lrc_text == lrc_ascii(body if lrc_includes_eot else digits)
+        return Fragment('address', address=int(digits), lrc_ok=ok), 6
+    if first == STX:
+        if len(buffer) < 7:
+            return None, 0
+        code, lrc_text, end = buffer[1:4], buffer[4:6], buffer[6]
+        if end != ETX:
+            return None, 1
+        ok = lrc_text == lrc_ascii(bytes([STX]) + code)
+        return Fragment('message', code=code.decode('latin-1'), lrc_ok=ok), 7
+    return None, 1

@@ -1,0 +1,209 @@
+"""
+A simulated AP ASCII line: MCD starters answering AP ASCII on a pty, faults injectable.
+
+The starters are the same :class:`McdModel` as the Modbus simulator's; NAK, BEL, silence
+and garbage can be injected per address.
+
+Behaviour as ``protocols.md`` and manual 000 section 10 describe it: a slave ACKs its own
+address fragment, NAKs a fragment with a bad LRC, answers a refused command with BEL and
+stays silent for addresses it does not serve.
+"""
+
+from collections import defaultdict, deque
+from dataclasses import dataclass
+import os
+import random
+import select
+import threading
+import time
+import tty
+from typing import Deque, Dict, List, Optional
+
+from drive_bridge.protocol import ap_ascii
+from drive_bridge.sim.mcd_model import McdModel, ModuleError
+
+FAULTS = ('nak', 'bel', 'silence', 'garbage')
+_COMMAND_VALUES = {'B10': 1, 'B12': 2, 'B14': 3, 'B16': 4, 'B18': 5}
+STALE_PARTIAL_S = 0.1  # a partial fragment older than this is dropped
+
+
+@dataclass
+class AsciiStats:
+    """What the simulated line saw."""
+
+    fragments: int = 0
+    acks: int = 0
+    naks: int = 0
+    bels: int = 0
+    replies: int = 0
+    faults_injected: int = 0
+    unserved: int = 0
+
+
+class ApAsciiSimServer:
+    """Serve MCD models over AP ASCII on a pty, on a thread of its own."""
+
+    def __init__(self, devices: Dict[int, McdModel], status_style: str = 'hex',
+                 lrc_includes_eot: Optional[bool] = None, seed: int = 1):
+        self.devices = devices
+        self.status_style = status_style
+        self.lrc_includes_eot = lrc_includes_eot  # None: accept both
+        self.lock = threading.RLock()
+        self.stats = AsciiStats()
+        self.silent_units: set = set()
+        self.faults: Dict[int, Deque[str]] = defaultdict(deque)
+        self.clock = time.monotonic
+        self.pty_path = ''
+        self._random = random.Random(seed)
+        self._fds: List[int] = []
+        self._master = -1
+        self._link_path = ''
+        self._selected: Optional[int] = None
+        self._buffer = b''
+        self._last_byte_s = 0.0
+        self._running = False
+        self._thread: Optional[threading.Thread] = None
+
+    def inject(self, unit: int, fault: str, count: int = 1) -> None:
+        """Make the next ``count`` replies of ``unit`` a NAK, BEL, silence or garbage."""
+        if fault not in FAULTS:
+            raise ValueError(f'fault must be one of {", ".join(FAULTS)}')
+        with self.lock:
+            self.faults[unit].extend([fault] * count)
+
+    def open_pty(self, link_path: str = '') -> str:
+        """Open a pty pair and serve on its master; return the slave's path."""
+        master, slave = os.openpty()
+        tty.setraw(master)
+        tty.setraw(slave)
+        os.set_blocking(master, False)
+        self._master = master
+        self._fds = [master, slave]
+        self.pty_path = os.ttyname(slave)
+        if link_path:
+            if os.path.islink(link_path):
+                os.unlink(link_path)
+            os.symlink(self.pty_path, link_path)
+            self._link_path = link_path
+        return self.pty_path
+
+    def start(self) -> 'ApAsciiSimServer':
+        """Serve on a background thread."""
+        self._running = True
+        self._thread = threading.Thread(target=self._serve, name='ap-ascii-sim', daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop serving and close the pty."""
+        self._running = False
+        if self._thread:
+            self._thread.join(timeout=5)
+        for fd in self._fds:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        if self._link_path and os.path.islink(self._link_path):
+            os.unlink(self._link_path)
+
+    def _serve(self) -> None:
+        while self._running:
+            ready, _, _ = select.select([self._master], [], [], 0.01)
+            now = self.clock()
+            if ready:
+                try:
+                    data = os.read(self._master, 1024)
+                except OSError:
+                    data = b''
+                if data:
+                    self._buffer += data
+                    self._last_byte_s = now
+                    self._process()
+            if self._buffer and now - self._last_byte_s > STALE_PARTIAL_S:
+                self._buffer = b''
+
+    def _process(self) -> None:
+        while self._buffer:
+            fragment, consumed = ap_ascii.decode_fragment(self._buffer, self.lrc_includes_eot)
+            if consumed == 0:
+                return
+            self._buffer = self._buffer[consumed:]
+            if fragment is not None:
+                with self.lock:
+                    self.stats.fragments += 1
+                    reply = self._answer(fragment)
+                if reply:
+                    os.write(self._master, reply)
+
+    def _answer(self, fragment: ap_ascii.Fragment) -> bytes:
+        if fragment.kind == 'address':
+            self._selected = None
+            unit = fragment.address
+            if unit not in self.devices or unit in self.silent_units:
+                self.stats.unserved += 1
+                return b''
+            if not fragment.lrc_ok:
+                return self._count(bytes([ap_ascii.NAK]))
+            reply = self._with_fault(unit, bytes([ap_ascii.ACK]))
+            if reply == bytes([ap_ascii.ACK]):
+                self._selected = unit
+            return reply
+        unit, self._selected = self._selected, None
+        if unit is None:
+            return b''
+        if not fragment.lrc_ok:
+            return self._count(bytes([ap_ascii.NAK]))
+        return self._with_fault(unit, self._execute(self.devices[unit], fragment.code))
+
+    def _execute(self, model: McdModel, code: str) -> bytes:
+        now = self.clock()
+        if code in _COMMAND_VALUES:
+            try:
+                model.write_register(1, _COMMAND_VALUES[code], now)
+            except ModuleError:
+                return bytes([ap_ascii.BEL])
+            return bytes([ap_ascii.ACK])
+        model.advance(now)
+        if code == 'C22':
+            status = model.status_word() | (0x80 if model.local_comms_error else 0)
+            return ap_ascii.data_fragment(ap_ascii.encode_status(status, self.status_style))
+        if code == 'C18':
+            return ap_ascii.data_fragment(ap_ascii.encode_status(model.trip_code,
+                                                                 self.status_style))
+        if code == 'D10':
+            value = model.motor_current_a * model.config.current_register_scale
+            return ap_ascii.data_fragment(ap_ascii.encode_data(min(9999, round(value))))
+        if code == 'D12':
+            value = min(9999, round(model.temperature_pct))
+            return ap_ascii.data_fragment(ap_ascii.encode_data(value))
+        return bytes([ap_ascii.BEL])
+
+    def _with_fault(self, unit: int, reply: bytes) -> bytes:
+        queue = self.faults.get(unit)
+        if queue:
+            fault = queue.popleft()
+            self.stats.faults_injected += 1
+            reply = {'nak': bytes([ap_ascii.NAK]), 'bel': bytes([ap_ascii.BEL]),
+                     'silence': b'',
+                     'garbage': bytes(self._random.randrange(0x20, 0x7F) for _ in range(5)),
+                     }[fault]
+            if fault != 'garbage':
+                self._selected = None
+        return self._count(reply)
+
+    def _count(self, reply: bytes) -> bytes:
+        kinds = {bytes([ap_ascii.ACK]): 'acks', bytes([ap_ascii.NAK]): 'naks',
+                 bytes([ap_ascii.BEL]): 'bels'}
+        name = kinds.get(reply, 'replies' if reply else '')
+        if name:
+            setattr(self.stats, name, getattr(self.stats, name) + 1)
+        return reply
+
+
+def make_ap_ascii_server(models: Dict[int, str], **settings) -> ApAsciiSimServer:
+    """Return a simulated AP ASCII line with one MCD per address: ``{20: 'mcd500'}``."""
+    from drive_bridge.sim.mcd_model import McdSimConfig
+    now = time.monotonic()
+    return ApAsciiSimServer({unit: McdModel(McdSimConfig(model=model, **settings), now)
+                             for unit, model in models.items()})

@@ -1,0 +1,150 @@
+"""
+AP ASCII master on a serial port (pyserial, 8N1): the exchanges of :mod:`..protocol.ap_ascii`.
+
+One transaction is address -> ACK -> command -> ACK, or address -> ACK -> request -> reply.
+A NAK (the slave saw a bad LRC, so it did not act) restarts the exchange from the address
+fragment, at most ``nak_retries`` times; a BEL (refused) is a DeviceException with code 7;
+silence is NoResponse (an unknown address never answers); anything else is BadFrame.
+"""
+
+import time
+from typing import Callable, Optional
+
+from drive_bridge.devices.base import AsciiCommand, AsciiRequest
+from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.protocol import ap_ascii
+from drive_bridge.transport.link import LinkSettings, open_hint, port_missing
+import serial
+
+BEL_CODE = ap_ascii.BEL  # the code a BEL is reported with (DeviceException.code)
+MIN_TIMEOUT_S = 0.25  # the MCD 3000 may take up to 250 ms to answer (protocols.md)
+
+
+class Nak(BadFrame):
+    """The slave answered NAK: it saw a bad LRC and did not act on the fragment."""
+
+
+class ApAsciiTransport:
+    """Run AP ASCII transactions on one serial line; the bus thread owns it."""
+
+    def __init__(self, settings: LinkSettings, nak_retries: int = 2,
+                 address_lrc_includes_eot: bool = True,
+                 open_port: Callable[..., object] = serial.serial_for_url):
+        self.settings = settings
+        self.nak_retries = nak_retries
+        self.address_lrc_includes_eot = address_lrc_includes_eot
+        self.naks = 0  # NAKs seen (each one retried or reported)
+        self._open_port = open_port
+        self._port = None
+
+    @property
+    def connected(self) -> bool:
+        """Return whether the port is open."""
+        return self._port is not None
+
+    def connect(self) -> None:
+        """Open the port at 8N1; raise LinkDown with the reason in words."""
+        self.close()
+        settings = self.settings
+        if port_missing(settings):
+            raise LinkDown(f'bus offline: {settings.port} not found')
+        try:
+            self._port = self._open_port(
+                settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
+                parity=serial.PARITY_NONE, stopbits=serial.STOPBITS_ONE,
+                timeout=settings.timeout_s)
+        except (serial.SerialException, OSError, ValueError) as error:
+            raise LinkDown(f'bus offline: cannot open {settings.port} {settings.baudrate} 8N1: '
+                           f'{error}' + open_hint(settings)) from error
+
+    def close(self) -> None:
+        """Close the port (idempotent)."""
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except (serial.SerialException, OSError):
+                pass
+
+    def execute(self, unit: int, transaction) -> Optional[int]:
+        """Run one transaction; return the status byte or data value of a request."""
+        if self._port is None:
+            raise LinkDown('bus offline: not connected')
+        if not isinstance(transaction, (AsciiCommand, AsciiRequest)):
+            raise TypeError(f'unsupported transaction {transaction!r}')
+        try:
+            return self._with_nak_retries(unit, transaction)
+        except (serial.SerialException, OSError) as error:
+            self.close()
+            if port_missing(self.settings):
+                raise LinkDown(f'bus offline: {self.settings.port} not found') from error
+            raise LinkDown(f'bus offline: {self.settings.port}: {error}') from error
+
+    def _with_nak_retries(self, unit: int, transaction) -> Optional[int]:
+        attempt = 0
+        while True:
+            try:
+                return self._exchange(unit, transaction)
+            except Nak as error:
+                self.naks += 1
+                if attempt >= self.nak_retries:
+                    raise BadFrame(f'{error} ({attempt + 1} attempts)') from None
+                attempt += 1
+
+    def _exchange(self, unit: int, transaction) -> Optional[int]:
+        self._send(ap_ascii.address_fragment(unit, self.address_lrc_includes_eot))
+        self._expect_ack('address')
+        self._send(ap_ascii.message_fragment(transaction.code))
+        if isinstance(transaction, AsciiCommand):
+            self._expect_ack(transaction.code)
+            return None
+        reply = self._receive()
+        if reply.kind != 'frame':
+            self._refused_or_bad(reply, transaction.code)
+        try:
+            if transaction.reply == 'status':
+                return ap_ascii.decode_status(reply.digits)
+            return ap_ascii.decode_data(reply.digits)
+        except ValueError as error:
+            raise BadFrame(f'invalid reply to {transaction.code}: {error}') from None
+
+    def _send(self, fragment: bytes) -> None:
+        self._port.reset_input_buffer()
+        self._port.write(fragment)
+
+    def _expect_ack(self, what: str) -> None:
+        reply = self._receive()
+        if reply.kind != 'ACK':
+            self._refused_or_bad(reply, what)
+
+    def _refused_or_bad(self, reply: ap_ascii.Reply, what: str) -> None:
+        if reply.kind == 'NAK':
+            raise Nak(f'NAK to {what}: the device saw a bad LRC')
+        if reply.kind == 'BEL':
+            raise DeviceException(BEL_CODE, f'{what} refused (BEL)')
+        if reply.kind == 'error':
+            raise BadFrame(f'invalid reply to {what}: {reply.error}')
+        raise BadFrame(f'unexpected {reply.kind} to {what}')
+
+    def _receive(self) -> ap_ascii.Reply:
+        deadline = time.monotonic() + self.settings.timeout_s
+        buffer = b''
+        while True:
+            reply = ap_ascii.decode_reply(buffer)
+            if reply.kind:
+                return reply
+            chunk = self._read(reply.needed - len(buffer), deadline)
+            if not chunk:
+                if not buffer:
+                    raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
+                raise BadFrame(f'truncated reply: {len(buffer)} bytes')
+            buffer += chunk
+
+    def _read(self, count: int, deadline: float) -> bytes:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            return b''
+        port = self._port
+        if port.timeout != remaining:
+            port.timeout = remaining
+        return port.read(count)
