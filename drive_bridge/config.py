@@ -114,6 +114,10 @@ DEVICE_SETTINGS: Tuple[Setting, ...] = (
             'drives: what the drive does on a control word timeout (FC: par. 8-04; 0 off, '
             '1 freeze, 2 stop, 3 jog, 4 max speed, 5 stop and trip); -1 = leave as set',
             choices=(-1, 0, 1, 2, 3, 4, 5), drives_only=True),
+    Setting('drive_link_timeout', float, 0.0,
+            "VLT option card: register 3, the card's drive communications timeout in seconds, "
+            'written when the drive comes online; 0 = leave it', low=0.0, high=655.35,
+            drives_only=True),
     Setting('current_parameter', int, 0,
             "drives: parameter number of the motor current readout; 0 = the model's own "
             '(FC 51: 1614 = 16-14; VLT 5000: 520; VLT 6000: 514)',
@@ -140,6 +144,7 @@ class DeviceConfig:
     comms_timeout: float = 0.0
     comms_timeout_function: int = -1
     current_parameter: int = 0
+    drive_link_timeout: float = 0.0
     protocol: str = 'modbus_rtu'
 
     @property

@@ -53,7 +53,8 @@ class DriveFamilyData:
     model_from_type: Callable[[str], Optional[str]] = lambda text: None
     timeout_time_parameter: Optional[int] = None  # FC: 8-03
     timeout_function_parameter: Optional[int] = None  # FC: 8-04
-    timeout_registers: Tuple[int, ...] = ()  # VLT: registers 2 and 3, 10 ms units
+    timeout_register: Optional[int] = None  # VLT: register 2, Modbus comms timeout, 10 ms
+    drive_link_timeout_register: Optional[int] = None  # VLT: register 3, card <-> drive
     text_read_index: Optional[int] = None  # VLT: IND = 0x0400 before a text read
     text_write_index: Optional[int] = None  # VLT: IND = 0x0500 before a text write
     parameter_label: Callable[[int], str] = str  # how the manual writes a number (16-14)
@@ -80,7 +81,8 @@ class DriveProfile:
 
     def __init__(self, data: DriveFamilyData, model: str = 'auto', current_scale: float = 1.0,
                  comms_timeout_s: float = 0.0, comms_timeout_function: int = -1,
-                 readout_overrides: Optional[Dict[str, int]] = None):
+                 readout_overrides: Optional[Dict[str, int]] = None,
+                 drive_link_timeout_s: float = 0.0):
         if model not in data.models:
             raise ConfigError(f'unknown {data.name} model {model!r}: allowed '
                               f'{", ".join(data.models)}')
@@ -88,6 +90,15 @@ class DriveProfile:
             raise ConfigError(f'comms_timeout_function applies to drives with a control word '
                               f'timeout function parameter (FC 8-04), not {data.name}: leave it '
                               'at -1 and set the drive on the drive')
+        if drive_link_timeout_s > 0 and data.drive_link_timeout_register is None:
+            raise ConfigError(f'drive_link_timeout applies to the VLT option card (register 3), '
+                              f'not {data.name}: leave it at 0')
+        for label, seconds in (('comms_timeout', comms_timeout_s),
+                               ('drive_link_timeout', drive_link_timeout_s)):
+            if data.timeout_register is not None and round(seconds * 100) > 0xFFFF:
+                raise ConfigError(f'{label} = {seconds} s does not fit the option card '
+                                  'register (10 ms units): allowed up to 655.35 s')
+        self.drive_link_timeout_s = drive_link_timeout_s
         self.data = data
         self.family = data.name
         self.configured_model = model
@@ -336,9 +347,10 @@ class DriveProfile:
         if self.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
             spec = data.spec(data.timeout_function_parameter)
             writes.append(self._write(spec, [self.comms_timeout_function]))
-        if self.comms_timeout_s > 0:
-            ticks = round(self.comms_timeout_s * 100)  # 10 ms units
-            writes += [WriteRegister(register, ticks) for register in data.timeout_registers]
+        for register, seconds in ((data.timeout_register, self.comms_timeout_s),
+                                  (data.drive_link_timeout_register, self.drive_link_timeout_s)):
+            if register is not None and seconds > 0:
+                writes.append(WriteRegister(register, round(seconds * 100)))  # 10 ms units
         return writes
 
     @staticmethod

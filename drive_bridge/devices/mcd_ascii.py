@@ -94,11 +94,14 @@ class McdAsciiProfile(mcd.McdProfile):
         return code, mcd.trip_name(code, self.model or '')
 
     def command_plan(self, command: str) -> CommandPlan:
-        """Return the AP ASCII command of ``command`` (B10 start ... B16 quick stop)."""
+        """Return the AP ASCII command of ``command`` (B10 start ... B18 forced comms trip)."""
         code = ap_ascii.COMMANDS.get(command)
-        if code is None or command == 'forced_comms_trip':
+        if code is None:
             raise CommandRefused(f'MCD starters have no {command} command (allowed: start, '
-                                 'stop, quick_stop, reset)')
+                                 'stop, quick_stop, reset; forced_comms_trip from Python)')
+        if command == 'forced_comms_trip' and self.model == 'mcd3000':
+            raise CommandRefused('the forced communication trip (B18) is a Modbus Module '
+                                 'command: the MCD 3000 has none')
         return CommandPlan(command, (AsciiCommand(code),))
 
     def parameter_plan(self, number: int, value: Optional[int] = None):

@@ -26,7 +26,8 @@ def _drive_profile(data):
         overrides = {'motor_current': device.current_parameter} \
             if device.current_parameter else {}
         return DriveProfile(data, device.model, device.current_scale, device.comms_timeout,
-                            device.comms_timeout_function, overrides)
+                            device.comms_timeout_function, overrides,
+                            device.drive_link_timeout)
     return make
 
 

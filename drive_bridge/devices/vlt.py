@@ -87,5 +87,5 @@ DATA = DriveFamilyData(
     conversion_factors=VLT_CONVERSION_FACTORS, alarm_bits={}, warning_bits={},
     extended_status_bits={}, explain_exception=explain_exception,
     index_register=REGISTER_IND, eeprom_coil=COIL_EEPROM,
-    timeout_registers=(REGISTER_MODBUS_TIMEOUT,),
+    timeout_register=REGISTER_MODBUS_TIMEOUT, drive_link_timeout_register=REGISTER_DRIVE_TIMEOUT,
     text_read_index=TEXT_READ_INDEX, text_write_index=TEXT_WRITE_INDEX)

@@ -87,9 +87,11 @@ def test_profile_requests_and_commands():
                                                      AsciiRequest('C18', 'status')]
     assert profile.command_plan('start').writes == (AsciiCommand('B10'),)
     assert profile.command_plan('quick_stop').writes == (AsciiCommand('B16'),)
-    for refused in ('coast_stop', 'forced_comms_trip'):
-        with pytest.raises(CommandRefused):
-            profile.command_plan(refused)
+    assert profile.command_plan('forced_comms_trip').writes == (AsciiCommand('B18'),)
+    with pytest.raises(CommandRefused):
+        profile.command_plan('coast_stop')
+    with pytest.raises(CommandRefused, match='MCD 3000 has none'):
+        McdAsciiProfile('mcd3000').command_plan('forced_comms_trip')
     with pytest.raises(CommandRefused, match='no parameter access'):
         profile.parameter_plan(1)
 

@@ -110,9 +110,13 @@ def test_exception_codes_of_the_option_card(profile):
         assert 'not in the option card manual' not in profile.explain_exception(code)
 
 
-def test_comms_timeout_goes_to_register_2_in_10_ms_units():
+def test_comms_timeouts_go_to_registers_2_and_3_in_10_ms_units():
     profile = DriveProfile(vlt.DATA, 'vlt6000', comms_timeout_s=1.5)
     assert profile.setup_plan() == [WriteRegister(1, 150)]
+    both = DriveProfile(vlt.DATA, 'vlt6000', comms_timeout_s=1.5, drive_link_timeout_s=0.5)
+    assert both.setup_plan() == [WriteRegister(1, 150), WriteRegister(2, 50)]
+    with pytest.raises(ConfigError, match='up to 655.35 s'):
+        DriveProfile(vlt.DATA, 'vlt6000', comms_timeout_s=700.0)
 
 
 def test_index_register_is_ind(profile):
@@ -126,6 +130,8 @@ def test_index_register_is_ind(profile):
     ({'model': 'vlt6000', 'comms_timeout_function': 2},
      "device 'fan': comms_timeout_function applies to drives with a control word timeout "
      'function parameter'),
+    ({'family': 'fc', 'model': 'fc51', 'drive_link_timeout': 1.0},
+     "device 'fan': drive_link_timeout applies to the VLT option card (register 3)"),
 ])
 def test_vlt_configuration_errors(device, message):
     with pytest.raises(ConfigError) as error:
