@@ -16,11 +16,11 @@ import random
 import select
 import threading
 import time
-import tty
-from typing import Deque, Dict, List, Optional
+from typing import Deque, Dict, Optional
 
 from drive_bridge.protocol import ap_ascii
 from drive_bridge.sim.mcd_model import McdModel, ModuleError
+from drive_bridge.sim.pty_link import PtyLink
 
 FAULTS = ('nak', 'bel', 'silence', 'garbage')
 _COMMAND_VALUES = {'B10': 1, 'B12': 2, 'B14': 3, 'B16': 4, 'B18': 5}
@@ -55,9 +55,8 @@ class ApAsciiSimServer:
         self.clock = time.monotonic
         self.pty_path = ''
         self._random = random.Random(seed)
-        self._fds: List[int] = []
+        self._pty: Optional[PtyLink] = None
         self._master = -1
-        self._link_path = ''
         self._selected: Optional[int] = None
         self._buffer = b''
         self._last_byte_s = 0.0
@@ -73,18 +72,9 @@ class ApAsciiSimServer:
 
     def open_pty(self, link_path: str = '') -> str:
         """Open a pty pair and serve on its master; return the slave's path."""
-        master, slave = os.openpty()
-        tty.setraw(master)
-        tty.setraw(slave)
-        os.set_blocking(master, False)
-        self._master = master
-        self._fds = [master, slave]
-        self.pty_path = os.ttyname(slave)
-        if link_path:
-            if os.path.islink(link_path):
-                os.unlink(link_path)
-            os.symlink(self.pty_path, link_path)
-            self._link_path = link_path
+        self._pty = PtyLink(link_path)
+        self._master = self._pty.master
+        self.pty_path = self._pty.path
         return self.pty_path
 
     def start(self) -> 'ApAsciiSimServer':
@@ -99,13 +89,8 @@ class ApAsciiSimServer:
         self._running = False
         if self._thread:
             self._thread.join(timeout=5)
-        for fd in self._fds:
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        if self._link_path and os.path.islink(self._link_path):
-            os.unlink(self._link_path)
+        if self._pty is not None:
+            self._pty.close()
 
     def _serve(self) -> None:
         while self._running:

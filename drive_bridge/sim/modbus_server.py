@@ -17,11 +17,11 @@ import socket
 import struct
 import threading
 import time
-import tty
 from typing import Callable, Dict, List, Optional, Protocol
 
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
+from drive_bridge.sim.pty_link import PtyLink
 
 GATEWAY_TARGET_FAILED = 0x0B  # Modbus exception: gateway target device failed to respond
 STALE_PARTIAL_FRAME_S = 0.05  # a partial frame older than this is dropped (pty has no gaps)
@@ -115,10 +115,9 @@ class ModbusSimServer:
         self.reply_hook: Optional[Callable[[int, bytes], Optional[bytes]]] = None
         self.pty_path = ''
         self.tcp_port = 0
-        self._link_path = ''
         self._selector = selectors.DefaultSelector()
         self._listeners: Dict[int, tuple] = {}
-        self._pty_fds: List[int] = []
+        self._ptys: List[PtyLink] = []
         self._wake_r, self._wake_w = os.pipe()
         self._selector.register(self._wake_r, selectors.EVENT_READ, None)
         self._thread: Optional[threading.Thread] = None
@@ -127,18 +126,11 @@ class ModbusSimServer:
     # -- endpoints ----------------------------------------------------------------------
     def open_pty(self, link_path: str = '') -> str:
         """Open a pty pair, serve RTU on its master; return the slave's path for clients."""
-        master, slave = os.openpty()
-        tty.setraw(slave)
-        tty.setraw(master)
-        os.set_blocking(master, False)
-        self._pty_fds += [master, slave]  # the slave stays open so the master never sees EIO
-        self.pty_path = os.ttyname(slave)
-        self._selector.register(master, selectors.EVENT_READ, _Connection(master, 'rtu'))
-        if link_path:
-            if os.path.islink(link_path):
-                os.unlink(link_path)
-            os.symlink(self.pty_path, link_path)
-            self._link_path = link_path
+        pty = PtyLink(link_path)
+        self._ptys.append(pty)
+        self.pty_path = pty.path
+        self._selector.register(pty.master, selectors.EVENT_READ,
+                                _Connection(pty.master, 'rtu'))
         return self.pty_path
 
     def open_tcp(self, host: str = '127.0.0.1', port: int = 0, framing: str = 'mbap') -> int:
@@ -171,14 +163,8 @@ class ModbusSimServer:
             self._thread.join(timeout=5)
         for key in list(self._selector.get_map().values()):
             self._close_key(key)
-        for fd in self._pty_fds:
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        self._pty_fds.clear()
-        if self._link_path and os.path.islink(self._link_path):
-            os.unlink(self._link_path)
+        for pty in self._ptys:
+            pty.close()
         os.close(self._wake_w)
 
     def _close_key(self, key) -> None:

@@ -11,9 +11,10 @@ import time
 from typing import Callable, Optional
 
 from drive_bridge.devices.base import AsciiCommand, AsciiRequest
-from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.errors import BadFrame, DeviceException, NoResponse
 from drive_bridge.protocol import ap_ascii
-from drive_bridge.transport.link import LinkSettings, open_hint, port_missing
+from drive_bridge.transport.link import LinkSettings
+from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 import serial
 
 BEL_CODE = ap_ascii.BEL  # the code a BEL is reported with (DeviceException.code)
@@ -24,61 +25,30 @@ class Nak(BadFrame):
     """The slave answered NAK: it saw a bad LRC and did not act on the fragment."""
 
 
-class ApAsciiTransport:
-    """Run AP ASCII transactions on one serial line; the bus thread owns it."""
+class ApAsciiTransport(SerialPortTransport):
+    """Run AP ASCII transactions on one serial line (8N1); the bus thread owns it."""
 
     def __init__(self, settings: LinkSettings, nak_retries: int = 2,
                  address_lrc_includes_eot: bool = True,
                  open_port: Callable[..., object] = serial.serial_for_url):
-        self.settings = settings
+        super().__init__(settings, open_port)
         self.nak_retries = nak_retries
         self.address_lrc_includes_eot = address_lrc_includes_eot
         self.naks = 0  # NAKs seen (each one retried or reported)
-        self._open_port = open_port
-        self._port = None
 
-    @property
-    def connected(self) -> bool:
-        """Return whether the port is open."""
-        return self._port is not None
-
-    def connect(self) -> None:
-        """Open the port at 8N1; raise LinkDown with the reason in words."""
-        self.close()
-        settings = self.settings
-        if port_missing(settings):
-            raise LinkDown(f'bus offline: {settings.port} not found')
-        try:
-            self._port = self._open_port(
-                settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
-                parity=serial.PARITY_NONE, stopbits=serial.STOPBITS_ONE,
-                timeout=settings.timeout_s)
-        except (serial.SerialException, OSError, ValueError) as error:
-            raise LinkDown(f'bus offline: cannot open {settings.port} {settings.baudrate} 8N1: '
-                           f'{error}' + open_hint(settings)) from error
-
-    def close(self) -> None:
-        """Close the port (idempotent)."""
-        port, self._port = self._port, None
-        if port is not None:
-            try:
-                port.close()
-            except (serial.SerialException, OSError):
-                pass
+    def framing(self) -> tuple:
+        """Return (parity, stop bits): AP ASCII is always 8N1."""
+        return 'N', 1
 
     def execute(self, unit: int, transaction) -> Optional[int]:
         """Run one transaction; return the status byte or data value of a request."""
-        if self._port is None:
-            raise LinkDown('bus offline: not connected')
+        self._require_port()
         if not isinstance(transaction, (AsciiCommand, AsciiRequest)):
             raise TypeError(f'unsupported transaction {transaction!r}')
         try:
             return self._with_nak_retries(unit, transaction)
-        except (serial.SerialException, OSError) as error:
-            self.close()
-            if port_missing(self.settings):
-                raise LinkDown(f'bus offline: {self.settings.port} not found') from error
-            raise LinkDown(f'bus offline: {self.settings.port}: {error}') from error
+        except PORT_ERRORS as error:
+            raise self._port_failed(error) from error
 
     def _with_nak_retries(self, unit: int, transaction) -> Optional[int]:
         attempt = 0
@@ -139,12 +109,3 @@ class ApAsciiTransport:
                     raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
                 raise BadFrame(f'truncated reply: {len(buffer)} bytes')
             buffer += chunk
-
-    def _read(self, count: int, deadline: float) -> bytes:
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
-            return b''
-        port = self._port
-        if port.timeout != remaining:
-            port.timeout = remaining
-        return port.read(count)

@@ -14,14 +14,10 @@ from typing import Callable, Dict, List, Optional
 
 from drive_bridge.devices.base import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
-from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.errors import BadFrame, DeviceException, NoResponse
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
-from drive_bridge.transport.link import LinkSettings, open_hint, port_missing
-import serial
-
-_PARITY = {'N': serial.PARITY_NONE, 'E': serial.PARITY_EVEN, 'O': serial.PARITY_ODD}
-_STOPBITS = {1: serial.STOPBITS_ONE, 2: serial.STOPBITS_TWO}
+from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 
 
 def _request(unit: int, transaction) -> RtuFrame:
@@ -63,56 +59,17 @@ def _coils(transaction: ReadCoils, reply: RtuFrame) -> List[bool]:
 _PARSERS: Dict[type, Callable] = {ReadRegisters: _registers, ReadCoils: _coils}
 
 
-class RtuSerialTransport:
+class RtuSerialTransport(SerialPortTransport):
     """Run single Modbus RTU transactions on a serial port; the bus thread owns it."""
-
-    def __init__(self, settings: LinkSettings,
-                 open_port: Callable[..., object] = serial.serial_for_url):
-        self.settings = settings
-        self._open_port = open_port
-        self._port = None
-
-    @property
-    def connected(self) -> bool:
-        """Return whether the port is open."""
-        return self._port is not None
-
-    def connect(self) -> None:
-        """Open the port; raise LinkDown with the reason in words."""
-        self.close()
-        settings = self.settings
-        if port_missing(settings):
-            raise LinkDown(f'bus offline: {settings.port} not found')
-        try:
-            self._port = self._open_port(
-                settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
-                parity=_PARITY[settings.parity],
-                stopbits=_STOPBITS[settings.effective_stopbits], timeout=settings.timeout_s)
-        except (serial.SerialException, OSError, ValueError) as error:
-            raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}'
-                           + open_hint(settings)) from error
-
-    def close(self) -> None:
-        """Close the port (idempotent)."""
-        port, self._port = self._port, None
-        if port is not None:
-            try:
-                port.close()
-            except (serial.SerialException, OSError):
-                pass
 
     def execute(self, unit: int, transaction) -> Optional[list]:
         """Run one transaction with device ``unit``; return registers or coils read, or None."""
-        if self._port is None:
-            raise LinkDown('bus offline: not connected')
+        self._require_port()
         request = _request(unit, transaction)
         try:
             reply = self._exchange(request)
-        except (serial.SerialException, OSError) as error:
-            self.close()
-            if port_missing(self.settings):
-                raise LinkDown(f'bus offline: {self.settings.port} not found') from error
-            raise LinkDown(f'bus offline: {self.settings.describe()}: {error}') from error
+        except PORT_ERRORS as error:
+            raise self._port_failed(error) from error
         if reply.function & 0x80:
             raise DeviceException(reply.data[0])
         parser = _PARSERS.get(type(transaction))
@@ -129,7 +86,7 @@ class RtuSerialTransport:
         encoded = request.encode()
         port.write(encoded)
         if self.settings.local_echo:
-            echo = self._read_exactly(len(encoded), time.monotonic() + self.settings.timeout_s)
+            echo = self._read(len(encoded), time.monotonic() + self.settings.timeout_s)
             if echo != encoded:
                 raise BadFrame('the adapter did not echo the request (local_echo is set)')
         return self._receive(request.unit, request.function)
@@ -139,7 +96,7 @@ class RtuSerialTransport:
         buffer = b''
         needed = rtu.MIN_RESPONSE_BYTES
         while True:
-            buffer += self._read_exactly(needed - len(buffer), deadline)
+            buffer += self._read(needed - len(buffer), deadline)
             result = rtu.decode_response(buffer, unit, function)
             if result.frame is not None:
                 return result.frame
@@ -152,22 +109,6 @@ class RtuSerialTransport:
                 raise BadFrame(f'truncated reply: {len(buffer)} of {needed} bytes within '
                                f'{self.settings.timeout_s:g} s')
             needed = result.needed
-
-    def _read_exactly(self, count: int, deadline: float) -> bytes:
-        """Read up to ``count`` bytes, returning early only when the deadline passes."""
-        port = self._port
-        data = b''
-        while len(data) < count:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                break
-            if port.timeout != remaining:
-                port.timeout = remaining
-            chunk = port.read(count - len(data))
-            if not chunk:
-                break
-            data += chunk
-        return data
 
     def _drain(self) -> None:
         """Drop what is still arriving after a bad reply (one character-gap of silence)."""

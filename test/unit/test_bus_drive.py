@@ -6,20 +6,10 @@ from drive_bridge.devices.base import ReadCoils, ReadRegisters, WriteCoils, Writ
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.errors import CommandRefused, DeviceException, NoResponse
 from drive_bridge.protocol import words
+from fakes import FakeClock, run_for
 import pytest
 
 RTT_S = 0.02
-
-
-class FakeClock:
-    def __init__(self):
-        self.now = 0.0
-
-    def __call__(self):
-        return self.now
-
-    def sleep(self, seconds):
-        self.now += seconds
 
 
 class FakeDrive:
@@ -70,14 +60,6 @@ def make_bus(timeout_s=0.0, **profile_options):
                                              backoff_initial_s=1.0, backoff_max_s=2.0),
                     listener=events.append, clock=clock, sleep=clock.sleep)
     return bus, drive, clock, events
-
-
-def run_for(bus, clock, seconds):
-    end = clock.now + seconds
-    while clock.now < end:
-        wait = bus.run_once()
-        if wait > 0:
-            clock.now += min(wait, end - clock.now)
 
 
 def control_words(drive):

@@ -7,21 +7,11 @@ from drive_bridge.devices import mcd
 from drive_bridge.devices.base import ReadRegisters, WriteRegister
 from drive_bridge.errors import (
     BadFrame, CommandRefused, DeviceException, LinkDown, NoResponse, TransportError)
+from fakes import FakeClock, run_for
 import pytest
 
 TIMEOUT_S = 0.5
 RTT_S = 0.02
-
-
-class FakeClock:
-    def __init__(self):
-        self.now = 0.0
-
-    def __call__(self):
-        return self.now
-
-    def sleep(self, seconds):
-        self.now += seconds
 
 
 class FakeTransport:
@@ -74,14 +64,6 @@ def make_bus(units, rates=None, timing=None, allow=None):
     bus = BusMaster(transport, specs, timing or BusTiming(), listener=events.append,
                     clock=clock, sleep=clock.sleep)
     return bus, transport, clock, events
-
-
-def run_for(bus, clock, seconds):
-    end = clock.now + seconds
-    while clock.now < end:
-        wait = bus.run_once()
-        if wait > 0:
-            clock.now += min(wait, end - clock.now)
 
 
 def test_each_device_polled_at_its_rate():

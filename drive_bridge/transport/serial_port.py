@@ -1,0 +1,83 @@
+"""The serial port that the native transports share: open, close, read until a deadline."""
+
+import time
+from typing import Callable
+
+from drive_bridge.errors import LinkDown
+from drive_bridge.transport.link import LinkSettings, open_hint, port_missing
+import serial
+
+PARITIES = {'N': serial.PARITY_NONE, 'E': serial.PARITY_EVEN, 'O': serial.PARITY_ODD}
+STOPBITS = {1: serial.STOPBITS_ONE, 2: serial.STOPBITS_TWO}
+PORT_ERRORS = (serial.SerialException, OSError)
+
+
+class SerialPortTransport:
+    """Own one pyserial port (device path or URL such as ``socket://``); subclasses talk."""
+
+    def __init__(self, settings: LinkSettings,
+                 open_port: Callable[..., object] = serial.serial_for_url):
+        self.settings = settings
+        self._open_port = open_port
+        self._port = None
+
+    @property
+    def connected(self) -> bool:
+        """Return whether the port is open."""
+        return self._port is not None
+
+    def framing(self) -> tuple:
+        """Return (parity, stop bits) to open the port with."""
+        return self.settings.parity, self.settings.effective_stopbits
+
+    def connect(self) -> None:
+        """Open the port; raise LinkDown with the reason in words."""
+        self.close()
+        settings = self.settings
+        if port_missing(settings):
+            raise LinkDown(f'bus offline: {settings.port} not found')
+        parity, stopbits = self.framing()
+        try:
+            self._port = self._open_port(
+                settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
+                parity=PARITIES[parity], stopbits=STOPBITS[stopbits],
+                timeout=settings.timeout_s)
+        except (*PORT_ERRORS, ValueError) as error:
+            raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}'
+                           + open_hint(settings)) from error
+
+    def close(self) -> None:
+        """Close the port (idempotent)."""
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except PORT_ERRORS:
+                pass
+
+    def _require_port(self) -> None:
+        if self._port is None:
+            raise LinkDown('bus offline: not connected')
+
+    def _port_failed(self, error: Exception) -> LinkDown:
+        """Close the port after an I/O error and return the LinkDown to raise."""
+        self.close()
+        if port_missing(self.settings):
+            return LinkDown(f'bus offline: {self.settings.port} not found')
+        return LinkDown(f'bus offline: {self.settings.describe()}: {error}')
+
+    def _read(self, count: int, deadline: float) -> bytes:
+        """Read up to ``count`` bytes; return early only when the deadline passes."""
+        port = self._port
+        data = b''
+        while len(data) < count:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            if port.timeout != remaining:
+                port.timeout = remaining
+            chunk = port.read(count - len(data))
+            if not chunk:
+                break
+            data += chunk
+        return data
