@@ -114,7 +114,7 @@ class BusEvent:
     """What the bus tells its listener: a new reading, or a change of link status."""
 
     device: str
-    kind: str  # 'reading', 'offline', 'online', 'error'
+    kind: str  # 'reading', 'offline', 'online', 'error' (state unknown), 'notice' (a log line)
     reading: Optional[DeviceReading] = None
     message: str = ''
 
@@ -431,7 +431,7 @@ class BusMaster:
                 + (f'failed: {error}' if error else 'sent'))
         with self._lock:
             device.stats.last_error = text
-        self._emit(BusEvent(device.spec.name, 'error' if error else 'notice', message=text))
+        self._emit(BusEvent(device.spec.name, 'notice', message=text))
 
     def _next_due_device(self) -> Optional[_Device]:
         with self._lock:
@@ -613,7 +613,7 @@ class BusMaster:
             text = self._explain(device, error)
             with self._lock:
                 device.setup_error = f'set-up write {write} failed: {text}'
-            self._emit(BusEvent(device.spec.name, 'error', message=device.setup_error))
+            self._emit(BusEvent(device.spec.name, 'notice', message=device.setup_error))
             return
         with self._lock:
             device.setup_error = ''

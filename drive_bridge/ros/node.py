@@ -301,8 +301,10 @@ def diagnostic_status(snapshot: DeviceSnapshot, link: str) -> DiagnosticStatus:
         values.update(_reading_values(reading))
         if reading.fault:
             status.level, status.message = DiagnosticStatus.ERROR, reading.fault
-        elif reading.warnings:
-            status.level, status.message = DiagnosticStatus.WARN, '; '.join(reading.warnings)
+        elif reading.warnings or snapshot.stats.get('setup_error'):
+            warnings = reading.warnings + [snapshot.stats.get('setup_error', '')]
+            status.level = DiagnosticStatus.WARN
+            status.message = '; '.join(warning for warning in warnings if warning)
         else:
             status.level, status.message = DiagnosticStatus.OK, reading.state
     values.update(snapshot.stats)

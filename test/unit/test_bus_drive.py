@@ -151,3 +151,14 @@ def test_local_operation_refuses_commands_before_sending():
     with pytest.raises(CommandRefused, match='local operation'):
         future.result(timeout=0)
     assert drive.writes() == []
+
+
+def test_a_refused_setup_write_is_reported_not_fatal():
+    bus, drive, clock, events = make_bus(comms_timeout_s=1.0)
+    drive.refuse[8029] = 4
+    run_for(bus, clock, 0.5)
+    snapshot = bus.snapshot('conv')
+    assert snapshot.online and snapshot.reading.state == 'ready'
+    assert 'set-up write' in snapshot.stats['setup_error']
+    assert 'register 7 = 17' in snapshot.stats['setup_error']
+    assert [e.kind for e in events if 'set-up' in e.message] == ['notice']
