@@ -11,7 +11,7 @@ import re
 from typing import Any, Dict, List, Optional, Tuple
 
 from drive_bridge.bus.master import BusTiming, DeviceSpec
-from drive_bridge.devices.registry import FAMILIES, PLANNED_FAMILIES
+from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.errors import ConfigError
 from drive_bridge.protocol import rtu
 from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
@@ -19,6 +19,8 @@ from drive_bridge.transport.link import LinkSettings
 
 PROTOCOLS = ('modbus_rtu', 'ap_ascii', 'modbus_tcp', 'rtu_over_tcp')
 AP_ASCII_MIN_TIMEOUT_S = 0.25  # the MCD 3000 may take up to 250 ms to answer
+DRIVES = ('fc', 'vlt')
+LVSG = ('lvsg',)
 BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
 PARITIES = ('N', 'E', 'O')
 DEVICE_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
@@ -42,7 +44,7 @@ class Setting:
     choices: Tuple = ()
     runtime: bool = False
     high_open: bool = False
-    drives_only: bool = False
+    families: Tuple[str, ...] = ()  # the families that take it; () = every family
 
     def allowed(self) -> str:
         """Return the allowed values in words."""
@@ -102,26 +104,38 @@ DEVICE_SETTINGS: Tuple[Setting, ...] = (
             'factor on the reported current (MCD5-0068B and smaller: 0.1)',
             low=0.001, high=1000.0),
     Setting('speed_reference', float, 0.0, 'drives: percent, FC scaling',
-            low=-200.0, high=200.0, high_open=True, runtime=True, drives_only=True),
+            low=-200.0, high=200.0, high_open=True, runtime=True, families=DRIVES),
     Setting('reference_timeout', float, 0.0,
             'drives: seconds without a speed_reference message before a ramp stop; 0 = off',
-            low=0.0, high=3600.0, runtime=True, drives_only=True),
+            low=0.0, high=3600.0, runtime=True, families=DRIVES),
     Setting('comms_timeout', float, 0.0,
             "drives: the drive's own control word timeout in seconds, written when the drive "
             'comes online (FC: par. 8-03); 0 = leave the drive as set',
-            low=0.0, high=6000.0, drives_only=True),
+            low=0.0, high=6000.0, families=DRIVES),
     Setting('comms_timeout_function', int, -1,
             'drives: what the drive does on a control word timeout (FC: par. 8-04; 0 off, '
             '1 freeze, 2 stop, 3 jog, 4 max speed, 5 stop and trip); -1 = leave as set',
-            choices=(-1, 0, 1, 2, 3, 4, 5), drives_only=True),
+            choices=(-1, 0, 1, 2, 3, 4, 5), families=DRIVES),
     Setting('drive_link_timeout', float, 0.0,
             "VLT option card: register 3, the card's drive communications timeout in seconds, "
             'written when the drive comes online; 0 = leave it', low=0.0, high=655.35,
-            drives_only=True),
+            families=DRIVES),
+    Setting('gateway_input_register', int, None,
+            "lvsg: frame address of the first register holding the slave's input bytes "
+            '(status) in the gateway', low=0, high=65535, families=LVSG),
+    Setting('gateway_output_register', int, None,
+            "lvsg: frame address of the first register holding the slave's output bytes "
+            '(control) in the gateway', low=0, high=65535, families=LVSG),
+    Setting('gateway_byte_order', str, 'big',
+            'lvsg: big = the first process byte is the high byte of a register',
+            choices=('big', 'little'), families=LVSG),
+    Setting('lvsg_module', str, 'extended',
+            'lvsg: the GSD module configured in the DP master: basic or extended',
+            choices=('basic', 'extended'), families=LVSG),
     Setting('current_parameter', int, 0,
             "drives: parameter number of the motor current readout; 0 = the model's own "
             '(FC 51: 1614 = 16-14; VLT 5000: 520; VLT 6000: 514)',
-            low=0, high=6553, drives_only=True),
+            low=0, high=6553, families=DRIVES),
 )
 BUS_SETTING = {setting.name: setting for setting in BUS_SETTINGS}
 DEVICE_SETTING = {setting.name: setting for setting in DEVICE_SETTINGS}
@@ -145,6 +159,10 @@ class DeviceConfig:
     comms_timeout_function: int = -1
     current_parameter: int = 0
     drive_link_timeout: float = 0.0
+    gateway_input_register: int = 0
+    gateway_output_register: int = 0
+    gateway_byte_order: str = 'big'
+    lvsg_module: str = 'extended'
     protocol: str = 'modbus_rtu'
 
     @property
@@ -273,9 +291,6 @@ def _checked_names(names: List[str]) -> List[str]:
 def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConfig:
     """Validate one device block."""
     family_name = values.get('family')
-    if family_name in PLANNED_FAMILIES:
-        raise ConfigError(f'parameter {name + ".family"!r} = {family_name!r} is not '
-                          f'implemented in this version: allowed {", ".join(FAMILIES)}')
     family = FAMILIES[check_value(DEVICE_SETTING['family'], family_name, f'{name}.family')]
     checked = {}
     for setting in device_settings(family.name):
@@ -283,10 +298,10 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
             setting, values.get(setting.name, setting.default), f'{name}.{setting.name}')
     for key in values:
         setting = DEVICE_SETTING.get(key)
-        if setting is not None and setting.drives_only and not family.is_drive and \
-                values[key] != setting.default:
-            raise ConfigError(f'parameter {name + "." + key!r} applies to drives only '
-                              f'(families {", ".join(drive_families())}), not {family.name}')
+        if setting is not None and setting.families and family.name not in setting.families \
+                and values[key] != setting.default:
+            raise ConfigError(f'parameter {name + "." + key!r} applies to families '
+                              f'{", ".join(setting.families)} only, not {family.name}')
     if checked['model'] not in family.models:
         hint = ' (this family cannot report its model: name it)' \
             if checked['model'] == 'auto' else ''
@@ -308,20 +323,21 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
 
 
 def device_settings(family: str) -> Tuple[Setting, ...]:
-    """Return the settings a device of ``family`` takes (drives have a few more)."""
-    is_drive = family in FAMILIES and FAMILIES[family].is_drive
-    return tuple(setting for setting in DEVICE_SETTINGS if is_drive or not setting.drives_only)
-
-
-def drive_families() -> List[str]:
-    """Return the names of the families that take a speed reference."""
-    return [name for name, family in FAMILIES.items() if family.is_drive]
+    """Return the settings a device of ``family`` takes (drives and lvsg have a few more)."""
+    return tuple(setting for setting in DEVICE_SETTINGS
+                 if not setting.families or family in setting.families)
 
 
 def _check_unique_addresses(devices: List[DeviceConfig]) -> None:
-    by_address: Dict[int, str] = {}
+    """One device an address; LVSG slaves share their gateway's, one input area each."""
+    by_key: Dict[tuple, str] = {}
     for device in devices:
-        other = by_address.setdefault(device.address, device.name)
+        lvsg_slave = device.family == 'lvsg'
+        key = (device.address, device.gateway_input_register) if lvsg_slave else \
+            (device.address,)
+        other = by_key.setdefault(key, device.name)
         if other != device.name:
-            raise ConfigError(f'parameter {device.name + ".address"!r} = {device.address} '
-                              f'is also the address of {other!r}: addresses must be unique')
+            where = f' and gateway_input_register {key[1]}' if len(key) > 1 else ''
+            raise ConfigError(f'parameter {device.name + ".address"!r} = {device.address}'
+                              f'{where} is also the address of {other!r}: addresses must be '
+                              'unique')

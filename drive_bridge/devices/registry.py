@@ -3,7 +3,7 @@
 from dataclasses import dataclass
 from typing import Callable, Dict, Tuple
 
-from drive_bridge.devices import fc, mcd, vlt
+from drive_bridge.devices import fc, lvsg, mcd, vlt
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.mcd_ascii import McdAsciiProfile
 
@@ -49,6 +49,12 @@ FAMILIES: Dict[str, Family] = {
         models=vlt.MODELS, address_range=vlt.ADDRESS_RANGE,
         protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'), is_drive=True,
         make_profile=_drive_profile(vlt.DATA)),
+    'lvsg': Family(
+        name='lvsg', description='MCD 200 with the Profibus Module, through a DP-master '
+        'gateway that maps the LVSG process image to Modbus registers',
+        models=lvsg.MODELS, address_range=lvsg.ADDRESS_RANGE,
+        protocols=('modbus_tcp', 'rtu_over_tcp', 'modbus_rtu'), is_drive=False,
+        make_profile=lambda device: lvsg.LvsgProfile(
+            device.model, device.current_scale, device.gateway_input_register,
+            device.gateway_output_register, device.gateway_byte_order, device.lvsg_module)),
 }
-# Families of the ROS contract that this version does not implement yet.
-PLANNED_FAMILIES = ('lvsg',)

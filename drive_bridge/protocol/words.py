@@ -74,3 +74,25 @@ def text_to_registers(text: str, characters: int) -> list:
         raise ValueError(f'text {text!r} is longer than {characters} characters')
     raw = raw.ljust(characters + characters % 2, b' ')
     return [int.from_bytes(raw[index:index + 2], 'big') for index in range(0, len(raw), 2)]
+
+
+def bytes_to_registers(data: bytes, byte_order: str = 'big') -> list:
+    """
+    Pack bytes into 16-bit registers, two a register, an odd last byte filled with 0.
+
+    ``byte_order`` 'big': the first byte is the high byte (how most Profibus-to-Modbus
+    gateways map a process image); 'little': the first byte is the low byte.
+    """
+    padded = bytes(data) + b'\x00' * (len(data) % 2)
+    order = 'big' if byte_order == 'big' else 'little'
+    return [int.from_bytes(padded[index:index + 2], order)
+            for index in range(0, len(padded), 2)]
+
+
+def registers_to_bytes(registers: list, count: int, byte_order: str = 'big') -> bytes:
+    """Unpack ``count`` bytes from 16-bit registers (see :func:`bytes_to_registers`)."""
+    order = 'big' if byte_order == 'big' else 'little'
+    data = b''.join((register & 0xFFFF).to_bytes(2, order) for register in registers)
+    if len(data) < count:
+        raise ValueError(f'{len(registers)} registers hold {len(data)} bytes, not {count}')
+    return data[:count]

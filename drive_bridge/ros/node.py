@@ -133,9 +133,9 @@ class DriveBridgeNode(Node):
                 continue
             device, _, setting = key.partition('.')
             if device in names and setting in cfg.DEVICE_SETTING and \
-                    cfg.DEVICE_SETTING[setting].drives_only:
-                raise ConfigError(f'parameter {key!r} applies to drives only (families '
-                                  f'{", ".join(cfg.drive_families())})')
+                    cfg.DEVICE_SETTING[setting].families:
+                raise ConfigError(f'parameter {key!r} applies to families '
+                                  f'{", ".join(cfg.DEVICE_SETTING[setting].families)} only')
             known = ', '.join(s.name for s in cfg.DEVICE_SETTINGS) if device in names \
                 else ', '.join(s.name for s in cfg.BUS_SETTINGS)
             raise ConfigError(f'unknown parameter {key!r} in the parameters: known are '

@@ -1,0 +1,151 @@
+"""Unit tests of the LVSG codec (manual 002's tables) and the MCD 200 gateway profile."""
+
+from drive_bridge.devices.base import ReadRegisters, WriteRegister, WriteRegisters
+from drive_bridge.devices.lvsg import LvsgProfile
+from drive_bridge.errors import CommandRefused, ModelMismatch
+from drive_bridge.protocol import lvsg, words
+from drive_bridge.protocol.lvsg import Control
+import pytest
+
+
+def test_control_bytes_of_the_profile():
+    assert Control(fwd_run=True).encode(False) == bytes([0x01, 0x00])  # byte 0 bit 0
+    assert Control(reset=True).encode(False) == bytes([0x08, 0x00])  # byte 0 bit 3
+    assert Control(quick_stop=True).encode(False) == bytes([0x00, 0x10])  # byte 1 bit 4
+    assert Control(fwd_run=True, parameter_request=3).encode(True) == bytes([1, 0, 3])
+    assert Control.decode(bytes([0x09, 0x10, 2])) == Control(True, True, True, 2)
+
+
+def test_status_bytes_and_percent_flc():
+    status = lvsg.decode_status(bytes([0b011, 0x80 | 63]))
+    assert status.ready and status.on and not status.fault and status.ramping
+    assert status.current_raw == 63
+    assert status.current_pct_flc == pytest.approx(200.0)  # "63 represents 200 % FLC"
+    assert lvsg.current_raw_from_pct(100.0) == 32  # 100 * 0.315 = 31.5 -> 32
+    assert lvsg.decode_status(bytes([0b100, 0])).fault
+    with pytest.raises(ValueError):
+        lvsg.decode_status(bytes(3))
+
+
+def test_extended_answer_bytes():
+    data = lvsg.encode_status(True, False, False, False, 0, answer=(3, 0x0123, False))
+    status = lvsg.decode_status(data)
+    assert (status.parameter, status.value, status.invalid_parameter) == (3, 0x0123, False)
+    assert data[4:] == bytes([0x23, 0x01])  # low byte, then high byte
+    invalid = lvsg.decode_status(lvsg.encode_status(True, False, False, False, 0, (9, 0, True)))
+    assert invalid.invalid_parameter
+
+
+def test_operating_parameters_and_tables():
+    assert lvsg.product_type((4 << 3) << 8 | 7) == 4  # parameter 1: type 4 = MCD 200
+    assert lvsg.split_state_parameter(2 << 8 | 0x46) == (2, 0x46)  # trip 2, fault, flags
+    assert lvsg.MCD200_STATES[5] == 'restart_delay' and lvsg.MCD200_STATES[0] == 'unknown'
+    assert lvsg.trip_name(16) == 'Communication failure between module and network'
+    assert lvsg.trip_name(255) == ''
+    assert lvsg.decode_diagnostic(bytes([3, 6, 0])) == 6  # length 3, trip code, reserved
+    with pytest.raises(ValueError):
+        lvsg.decode_diagnostic(bytes([2, 6]))
+
+
+def test_register_packing_both_byte_orders():
+    assert words.bytes_to_registers(bytes([1, 2, 3]), 'big') == [0x0102, 0x0300]
+    assert words.bytes_to_registers(bytes([1, 2, 3]), 'little') == [0x0201, 0x0003]
+    assert words.registers_to_bytes([0x0201, 0x0003], 3, 'little') == bytes([1, 2, 3])
+
+
+def image(status: bytes, byte_order='big'):
+    return words.bytes_to_registers(status, byte_order)
+
+
+def poll(profile, input_bytes, output_bytes=None):
+    items = profile.poll_plan()
+    results = []
+    for item in items:
+        if item.key == 'output':
+            results.append(image(output_bytes if output_bytes is not None else bytes(3)))
+        elif item.key == 'input':
+            results.append(image(input_bytes))
+        else:
+            results.append(None)
+    return items, profile.decode(results)
+
+
+def answer(parameter, value, ready=True, on=False, fault=False, ramping=False):
+    return lvsg.encode_status(ready, on, fault, ramping, 0, (parameter, value, False))
+
+
+def test_first_poll_reads_the_output_image_back_then_cycles_parameters():
+    profile = LvsgProfile('auto', input_register=0, output_register=100)
+    items, _ = poll(profile, answer(0, 0))
+    assert items[0].transaction == ReadRegisters(100, 2) and items[0].optional
+    assert items[1].transaction == ReadRegisters(0, 3)
+    values = {1: (4 << 3) << 8 | 3, 2: 255 << 8 | 1, 3: 2222, 4: 111}
+    for parameter in (1, 2, 3, 4):
+        items, reading = poll(profile, answer(parameter, values[parameter]))
+        assert items[0].key == 'write'
+        requested = words.registers_to_bytes(list(items[0].transaction.values), 3)[2]
+        assert requested == parameter
+    assert profile.model == 'mcd201'  # current 2222 and temperature 111 are its placeholders
+    assert reading.motor_current_a is None and reading.state == 'ready'
+
+
+def test_adopted_fwd_run_never_starts_a_stopped_starter():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100)
+    poll(profile, answer(0, 0), output_bytes=bytes([1, 0, 0]))  # Fwd Run left set, not on
+    assert profile.control.fwd_run is False
+    running = LvsgProfile('mcd202', input_register=0, output_register=100)
+    poll(running, answer(0, 0, ready=False, on=True), output_bytes=bytes([1, 0, 0]))
+    assert running.control.fwd_run is True  # on: keeping Fwd Run keeps it running, no start
+
+
+def test_a_trip_clears_fwd_run():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100)
+    poll(profile, answer(0, 0))
+    profile.command_plan('start').on_acknowledged()
+    assert profile.control.fwd_run
+    _, reading = poll(profile, answer(0, 0, ready=False, fault=True))
+    assert profile.control.fwd_run is False
+    assert profile.request == lvsg.PARAMETER_STATE  # the trip code is asked for next
+    _, reading = poll(profile, answer(2, 2 << 8 | 6, ready=False, fault=True))
+    assert (reading.state, reading.trip_code, reading.trip_name) == ('tripped', 2,
+                                                                     'Motor overload')
+
+
+def test_commands_as_image_writes():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100, module='basic')
+    poll(profile, lvsg.encode_status(False, True, False, False, 30), output_bytes=bytes([1, 0]))
+    assert profile.poll_plan()[0].transaction == ReadRegisters(0, 1)  # basic: no write yet
+    quick = profile.command_plan('quick_stop').writes
+    assert quick == (WriteRegister(100, 0x0110), WriteRegister(100, 0x0010))  # QS, then run off
+    reset = profile.command_plan('reset').writes
+    assert [words.registers_to_bytes([w.value], 2)[0] for w in reset] == [0x08, 0x00]
+    assert profile.command_plan('start').writes == (WriteRegister(100, 0x0100),)
+    with pytest.raises(CommandRefused):
+        profile.command_plan('coast_stop')
+    with pytest.raises(CommandRefused, match='no parameter access'):
+        profile.parameter_plan(1)
+    extended = LvsgProfile('mcd202', input_register=0, output_register=100)
+    assert isinstance(extended.command_plan('start').writes[0], WriteRegisters)
+
+
+def test_states_from_status_bits():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100, module='basic')
+    cases = [((True, False, False, False), 'ready'), ((False, True, False, False), 'running'),
+             ((False, False, True, False), 'tripped'), ((False, False, False, False),
+                                                        'not_ready')]
+    for (ready, on, fault, ramping), state in cases:
+        _, reading = poll(profile, lvsg.encode_status(ready, on, fault, ramping, 0),
+                          bytes(2))
+        assert reading.state == state
+    profile.command_plan('start').on_acknowledged()
+    _, reading = poll(profile, lvsg.encode_status(False, True, False, True, 40))
+    assert reading.state == 'starting' and reading.details['motor_current_pct_flc'] == '127'
+    _, reading = poll(profile, lvsg.encode_status(False, False, True, False, 0))
+    assert reading.trip_name.startswith('tripped (trip code not known')
+
+
+def test_wrong_product_type_is_a_model_mismatch():
+    profile = LvsgProfile('auto', input_register=0, output_register=100)
+    poll(profile, answer(0, 0))
+    with pytest.raises(ModelMismatch, match='product type 7'):
+        poll(profile, answer(1, (7 << 3) << 8))
