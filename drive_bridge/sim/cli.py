@@ -7,6 +7,7 @@ Examples::
     drive_bridge_sim --device mcd500:20 --device mcd202:21 --tcp 5020 --framing rtu
     drive_bridge_sim --device fc51:1 --device mcd500:20 --link /tmp/ttyLINE
     drive_bridge_sim --protocol ap_ascii --device mcd500:20 --device mcd3000:21
+    drive_bridge_sim --lvsg mcd202:0:100 --lvsg mcd201:10:110:basic --no-pty --tcp 5020
 
 With ``--console`` (default when standard input is a terminal) it reads commands:
 ``trip ADDR CODE`` (MCD trip code; FC: alarm word bit, 5 = over current), ``hand ADDR
@@ -25,6 +26,7 @@ from drive_bridge.devices import mcd
 from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
 from drive_bridge.sim.devices import make_device, SIM_MODELS
 from drive_bridge.sim.fc_device import FcSimDevice
+from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
 
 
@@ -43,11 +45,26 @@ def parse_device(text: str) -> tuple:
     return model, unit
 
 
+def parse_lvsg(text: str) -> tuple:
+    """Parse ``MODEL:IN:OUT[:basic]`` into (input register, (model, output register, module))."""
+    parts = text.split(':')
+    if len(parts) not in (3, 4) or parts[0] not in ('mcd201', 'mcd202') or \
+            not all(part.isdigit() for part in parts[1:3]) or parts[3:] not in ([], ['basic']):
+        raise argparse.ArgumentTypeError(
+            f'{text!r}: give MODEL:IN:OUT[:basic], MODEL mcd201 or mcd202, IN and OUT register '
+            'numbers (frame addresses)')
+    return int(parts[1]), (parts[0], int(parts[2]), 'basic' if parts[3:] else 'extended')
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
     parser = argparse.ArgumentParser(prog='drive_bridge_sim', description=__doc__.split('\n')[0])
-    parser.add_argument('--device', action='append', type=parse_device, required=True,
+    parser.add_argument('--device', action='append', type=parse_device, default=[],
                         metavar='MODEL:ADDRESS', help=f'models: {", ".join(SIM_MODELS)}')
+    parser.add_argument('--lvsg', action='append', type=parse_lvsg, default=[],
+                        metavar='MODEL:IN:OUT[:basic]',
+                        help='an MCD 200 (mcd201, mcd202) with the Profibus Module behind a '
+                             'Modbus gateway at unit 1: input and output image registers')
     parser.add_argument('--protocol', choices=('modbus', 'ap_ascii'), default='modbus',
                         help='ap_ascii: MCD starters on an AP ASCII line (pty only)')
     parser.add_argument('--link', default='', help='symlink to create for the pty')
@@ -76,6 +93,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def build_server(args: argparse.Namespace):
     """Create the devices and the server (Modbus or AP ASCII) from parsed arguments."""
+    if args.lvsg:
+        if args.device:
+            raise SystemExit('drive_bridge_sim: --lvsg (a gateway) and --device do not mix')
+        return make_lvsg_gateway(dict(args.lvsg), start_time_s=args.start_time,
+                                 stop_time_s=args.stop_time, motor_flc_a=args.flc)
+    if not args.device:
+        raise SystemExit('drive_bridge_sim: give at least one --device or --lvsg')
     now = time.monotonic()
     settings = {
         'mcd': {'start_time_s': args.start_time, 'stop_time_s': args.stop_time,
@@ -186,7 +210,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'tcp: {args.host}:{server.open_tcp(args.host, args.tcp, args.framing)} '
               f'({args.framing})', flush=True)
     server.start()
-    print('ready: ' + ', '.join(f'{m}@{u}' for m, u in args.device), flush=True)
+    served = [f'{m}@{u}' for m, u in args.device] + \
+        [f'{m} in {i} out {o} ({kind})' for i, (m, o, kind) in args.lvsg]
+    print('ready: ' + ', '.join(served), flush=True)
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     signal.signal(signal.SIGINT, lambda *_: done.set())

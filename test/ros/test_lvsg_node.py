@@ -1,0 +1,45 @@
+"""The node with an MCD 200 behind a simulated Profibus gateway (Modbus TCP), through rclpy."""
+
+from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
+from drive_bridge.sim.mcd_model import READY
+from ros_helpers import RosClient, start_node, stop_node, write_params
+
+
+def test_lvsg_start_trip_reset_quick_stop(tmp_path):
+    server = make_lvsg_gateway({0: ('mcd202', 100, 'extended')}, start_time_s=0.5,
+                               stop_time_s=0.5)
+    port = server.open_tcp()
+    server.start()
+    params = write_params(tmp_path / 'lvsg.yaml', {'protocol': 'modbus_tcp', 'tcp_port': port,
+                                                   'timeout': 0.3},
+                          {'mixer': {'family': 'lvsg', 'address': 1, 'poll_rate': 10.0,
+                                     'gateway_input_register': 0,
+                                     'gateway_output_register': 100}})
+    process = start_node(params)
+    client = RosClient(['mixer'])
+    slave = server.devices[1].slaves[0]
+    try:
+        assert client.wait_state('mixer', 'ready', 15.0)
+        assert client.call('mixer', 'start').success
+        assert client.wait_state('mixer', 'running')
+        assert client.spin_until(lambda: client.values('mixer', 'motor_current')[-1:] and
+                                 client.values('mixer', 'motor_current')[-1] > 70)
+        with server.lock:
+            slave.model.trip(3, server.clock())
+        assert client.wait_state('mixer', 'tripped')
+        assert client.spin_until(lambda: client.values('mixer', 'trip')[-1:] ==
+                                 ['Motor thermistor'])
+        assert client.call('mixer', 'reset').success
+        assert client.wait_state('mixer', 'ready')
+        assert slave.model.state == READY  # the reset did not restart the motor
+        assert client.call('mixer', 'start').success
+        assert client.wait_state('mixer', 'running')
+        assert client.call('mixer', 'quick_stop').success
+        assert client.wait_state('mixer', 'ready')
+        assert client.spin_until(lambda: client.diagnostics('mixer') is not None)
+        assert client.diagnostics('mixer').hardware_id == 'lvsg mcd202 address 1'
+    finally:
+        client.close()
+        code, output = stop_node(process)
+        server.stop()
+    assert code == 0, output
