@@ -116,7 +116,6 @@ class DriveProfile:
         self._values: Dict[str, object] = {}
         self._rotation = 0
         self._plan_keys: List[str] = []
-        self._last_status: Optional[StatusWord] = None
 
     # -- model and readouts -------------------------------------------------------------
     @property
@@ -143,7 +142,6 @@ class DriveProfile:
         self.control_word = None
         self.reached_reference = False
         self._values.clear()
-        self._last_status = None
         self._identified = self.data.identify_parameter is None
 
     # -- polling ------------------------------------------------------------------------
@@ -211,7 +209,6 @@ class DriveProfile:
                 self._values[name] = decode_value(spec, by_key[name],
                                                   self.data.conversion_factors)
         status = StatusWord(status_word)
-        self._last_status = status
         if self.commanded_run and status.flag(fc_control.STW_ON_REFERENCE):
             self.reached_reference = True
         reading = DeviceReading(
