@@ -13,12 +13,11 @@ from typing import Any, Dict, List, Optional, Tuple
 from drive_bridge.bus.master import BusTiming, DeviceSpec
 from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.errors import ConfigError
-from drive_bridge.protocol import rtu
+from drive_bridge.protocol import ap_ascii, rtu
 from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
 from drive_bridge.transport.link import LinkSettings
 
 PROTOCOLS = ('modbus_rtu', 'ap_ascii', 'modbus_tcp', 'rtu_over_tcp')
-AP_ASCII_MIN_TIMEOUT_S = 0.25  # the MCD 3000 may take up to 250 ms to answer
 DRIVES = ('fc', 'vlt')
 LVSG = ('lvsg',)
 BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
@@ -270,9 +269,9 @@ def _check_ap_ascii(bus: Dict[str, Any]) -> None:
         raise ConfigError(f"parameter 'parity' = {bus['parity']!r}, 'stopbits' = "
                           f"{bus['stopbits']} do not fit protocol 'ap_ascii': AP ASCII is "
                           '8N1, set parity: "N" and stopbits: 0 or 1')
-    if bus['timeout'] < AP_ASCII_MIN_TIMEOUT_S:
+    if bus['timeout'] < ap_ascii.MIN_TIMEOUT_S:
         raise ConfigError(f"parameter 'timeout' = {bus['timeout']} is too short for "
-                          f"protocol 'ap_ascii': allowed [{AP_ASCII_MIN_TIMEOUT_S}, 10] (an MCD "
+                          f"protocol 'ap_ascii': allowed [{ap_ascii.MIN_TIMEOUT_S}, 10] (an MCD "
                           '3000 may take 250 ms to answer)')
 
 

@@ -25,7 +25,6 @@ MCD3000_TRIP_CODES: Dict[int, str] = {
     10: 'Starter overtemperature',
 }
 MCD3000_SHORTED_SCR_TOPIC_CODE = 256
-BEL_CODE = ap_ascii.BEL
 
 
 class McdAsciiProfile(mcd.McdProfile):
@@ -110,7 +109,7 @@ class McdAsciiProfile(mcd.McdProfile):
 
     def explain_exception(self, code: int, detail: Optional[int] = None) -> str:
         """Return technician text for a BEL (the only refusal AP ASCII has)."""
-        if code == BEL_CODE:
+        if code == ap_ascii.BEL:
             return ('refused by the starter (BEL): network control may be disabled (Hand On '
                     'mode or MCD 500 par. 3-2), or the MCD 3000 does not accept it now')
         return f'AP ASCII error {code}'

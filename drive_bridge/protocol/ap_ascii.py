@@ -19,6 +19,7 @@ STX, ETX, EOT, ENQ, ACK, NAK, BEL = 0x02, 0x03, 0x04, 0x05, 0x06, 0x15, 0x07
 SINGLE_BYTE_REPLIES = {ACK: 'ACK', NAK: 'NAK', BEL: 'BEL'}
 FRAME_BYTES = 8  # STX d d d d lrc lrc ETX
 ADDRESS_RANGE = (1, 99)  # two decimal digits
+MIN_TIMEOUT_S = 0.25  # the MCD 3000 may take up to 250 ms to answer (protocols.md)
 
 # Section 10.1: commands.
 COMMANDS = {'start': 'B10', 'stop': 'B12', 'reset': 'B14', 'quick_stop': 'B16',

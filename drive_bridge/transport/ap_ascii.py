@@ -17,9 +17,6 @@ from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 import serial
 
-BEL_CODE = ap_ascii.BEL  # the code a BEL is reported with (DeviceException.code)
-MIN_TIMEOUT_S = 0.25  # the MCD 3000 may take up to 250 ms to answer (protocols.md)
-
 
 class Nak(BadFrame):
     """The slave answered NAK: it saw a bad LRC and did not act on the fragment."""
@@ -91,7 +88,7 @@ class ApAsciiTransport(SerialPortTransport):
         if reply.kind == 'NAK':
             raise Nak(f'NAK to {what}: the device saw a bad LRC')
         if reply.kind == 'BEL':
-            raise DeviceException(BEL_CODE, f'{what} refused (BEL)')
+            raise DeviceException(ap_ascii.BEL, f'{what} refused (BEL)')
         if reply.kind == 'error':
             raise BadFrame(f'invalid reply to {what}: {reply.error}')
         raise BadFrame(f'unexpected {reply.kind} to {what}')
