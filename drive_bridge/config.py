@@ -18,7 +18,7 @@ from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
 from drive_bridge.transport.link import LinkSettings
 
 PROTOCOLS = ('modbus_rtu', 'ap_ascii', 'modbus_tcp', 'rtu_over_tcp')
-DRIVES = ('fc', 'vlt')
+DRIVES = tuple(name for name, family in FAMILIES.items() if family.is_drive)
 LVSG = ('lvsg',)
 BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
 PARITIES = ('N', 'E', 'O')
