@@ -242,9 +242,7 @@ class BusMaster:
                 profile = device.spec.profile
                 if hasattr(profile, 'check_command'):
                     profile.check_command(command, device.reading)
-                plan = profile.command_plan(command)
-                self._enqueue(_Job(device, command, plan.writes, future,
-                                   on_acknowledged=plan.on_acknowledged))
+                self._enqueue_command(device, command, future)
         except CommandRefused as error:
             future.set_exception(error)
         return future
@@ -285,10 +283,7 @@ class BusMaster:
         outside [-200, 200) %; returns the 16-bit reference word.
         """
         with self._lock:
-            device = self._devices.get(name)
-            if device is None:
-                raise CommandRefused(
-                    f'unknown device {name!r}: this bus has {", ".join(self._devices)}')
+            device = self._known_device(name)
             profile = device.spec.profile
             if not hasattr(profile, 'set_reference'):
                 raise CommandRefused(f'{name} ({profile.family}) takes no speed reference')
@@ -311,11 +306,15 @@ class BusMaster:
             device.spec.reference_timeout_s = timeout_s
             device.reference_deadline_s = self.clock() + timeout_s
 
-    def _checked_device(self, name: str, command: str, control: bool) -> _Device:
+    def _known_device(self, name: str) -> _Device:
         device = self._devices.get(name)
         if device is None:
             raise CommandRefused(
                 f'unknown device {name!r}: this bus has {", ".join(self._devices)}')
+        return device
+
+    def _checked_device(self, name: str, command: str, control: bool) -> _Device:
+        device = self._known_device(name)
         if control and not device.spec.allow_control:
             raise CommandRefused(f'{name} is monitor only (allow_control is false): '
                                  'nothing sent')
@@ -330,6 +329,12 @@ class BusMaster:
             raise CommandRefused(f'{name} is tripped ({reading.trip_name or "no trip name"}):'
                                  ' reset it first; nothing sent')
         return device
+
+    def _enqueue_command(self, device: _Device, command: str, future: Future) -> None:
+        """Queue the writes of the profile's plan for ``command``."""
+        plan = device.spec.profile.command_plan(command)
+        self._enqueue(_Job(device, command, plan.writes, future,
+                           on_acknowledged=plan.on_acknowledged))
 
     def _enqueue(self, job: _Job) -> None:
         self._jobs.append(job)
@@ -418,11 +423,9 @@ class BusMaster:
                     continue
                 device.reference_deadline_s = float('inf')
                 device.deadman_stops += 1
-                plan = device.spec.profile.command_plan('stop')
                 future: Future = Future()
                 future.add_done_callback(lambda done, d=device: self._deadman_done(d, done))
-                self._enqueue(_Job(device, 'stop', plan.writes, future,
-                                   on_acknowledged=plan.on_acknowledged))
+                self._enqueue_command(device, 'stop', future)
 
     def _deadman_done(self, device: _Device, future: Future) -> None:
         error = future.exception()
@@ -668,7 +671,7 @@ class BusMaster:
             try:
                 detail = self._transact(device, detail_read)[0]
             except TransportError:
-                detail = None
+                pass  # explained without the detail
         return profile.explain_exception(error.code, detail)
 
     def _may_have_started(self, device: _Device, command: str) -> None:
