@@ -13,9 +13,10 @@ output at once; reset acts on the rising edge of bit 7. The control word timeout
 8-03/8-04) stops or trips the drive when the master stops writing. Alarms are injectable.
 """
 
+from collections import deque
 from dataclasses import dataclass, field
 import math
-from typing import Dict, Optional
+from typing import Deque, Dict, Optional
 
 from drive_bridge.devices import fc, vlt
 from drive_bridge.devices.parameters import DATA_TYPES, TEXT
@@ -79,7 +80,7 @@ class FcModel:
         self.last_control_write_s: Optional[float] = None
         self.timeout_active = False
         self.last_error = 0
-        self.control_words_received = []
+        self.control_words_received: Deque[int] = deque(maxlen=1000)  # the latest
         # The ramps live under the FC numbers 3-41, 3-42 and 3-81 in both variants.
         self.parameters: Dict[int, object] = {
             341: round(self.config.ramp_up_s * 100), 342: round(self.config.ramp_down_s * 100),

@@ -12,10 +12,11 @@ Comms Timeout trips the starter (trip 16). ``modbus_watchdog_s`` makes the gatew
 Clear mode for a slave whose output image was not written for that long, as gateways can.
 """
 
+from collections import deque
 from dataclasses import dataclass, field
 import struct
 import time
-from typing import Dict, List, Optional
+from typing import Deque, Dict, List, Optional
 
 from drive_bridge.protocol import lvsg, rtu
 from drive_bridge.protocol.lvsg import Control
@@ -45,7 +46,7 @@ class LvsgSlave:
     network_failed_at: Optional[float] = None
     started_once: bool = False
     last_write_s: Optional[float] = None
-    writes: List[bytes] = field(default_factory=list)
+    writes: Deque[bytes] = field(default_factory=lambda: deque(maxlen=1000))  # the latest
 
     @property
     def input_bytes(self) -> int:

@@ -104,7 +104,7 @@ def test_drive_and_starter_on_one_bus(bus, sim):
     drive = sim.devices[1].model
     assert wait_until(lambda: drive.parameters[803] == 20 and drive.parameters[804] == 2, 2.0)
     assert bus.snapshot('conv').model == 'fc51'
-    assert drive.control_words_received == []  # nothing written before a command
+    assert list(drive.control_words_received) == []  # nothing written before a command
     assert bus.submit_command('conv', 'start').result(3) == \
         'start acknowledged by conv (address 1)'
     assert wait_until(lambda: state(bus) == 'running', 3.0)

@@ -58,7 +58,7 @@ def test_start_current_quick_stop_trip_reset(gateway):
 def test_basic_module_mcd201(gateway):
     bus, slave = gateway, gateway.slaves[1]
     assert wait_until(lambda: reading(bus, 'fan') is not None, 3.0)
-    assert slave.writes == []  # basic module: nothing written before a command
+    assert list(slave.writes) == []  # basic module: nothing written before a command
     assert bus.submit_command('fan', 'start').result(3)
     assert wait_until(lambda: reading(bus, 'fan').state == 'running', 3.0)
     assert reading(bus, 'fan').motor_current_a is None  # the MCD 201 reports no current
