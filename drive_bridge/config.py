@@ -258,7 +258,8 @@ def build_config(bus_values: Dict[str, Any], device_values: Dict[str, Dict[str, 
         gap = rtu.frame_gap_s(link.baudrate, link.parity, link.effective_stopbits)
     timing = BusTiming(retries=bus['retries'], offline_after=bus['offline_after'],
                        backoff_initial_s=min(1.0, bus['backoff_max']),
-                       backoff_max_s=bus['backoff_max'], frame_gap_s=gap)
+                       backoff_max_s=bus['backoff_max'], frame_gap_s=gap,
+                       slow_reply_s=bus['timeout'] / 2)
     return BridgeConfig(link, timing, devices, bus['diagnostics_period'], bus['serial_engine'],
                         bus['ap_nak_retries'], bus['ap_address_lrc_eot'])
 

@@ -37,6 +37,29 @@ class BadFrame(TransportError):
     kind = 'bad_frame'
 
 
+class CrcError(BadFrame):
+    """A reply of the right length from the right address whose CRC is wrong (line noise)."""
+
+    kind = 'crc'
+
+
+class WrongAddress(BadFrame):
+    """A reply that starts with another device's address."""
+
+    kind = 'wrong_address'
+
+
+class TruncatedFrame(BadFrame):
+    """Part of a reply came back, then silence until the timeout."""
+
+    kind = 'truncated'
+
+
+# Every transaction failure kind, in the order /diagnostics lists them.
+FAILURE_KINDS = ('timeout', 'crc', 'wrong_address', 'truncated', 'bad_frame', 'exception',
+                 'nak', 'link')
+
+
 class DeviceException(TransportError):
     """The device answered with a Modbus exception code; it did not execute the request."""
 

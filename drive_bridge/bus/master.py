@@ -22,8 +22,8 @@ from typing import Callable, Deque, Dict, List, Optional
 
 from drive_bridge.devices.base import DeviceReading, PollItem
 from drive_bridge.errors import (
-    BadFrame, CommandRefused, DeviceException, LinkDown, ModelMismatch, NoResponse,
-    ProtocolError, TransportError)
+    BadFrame, CommandRefused, DeviceException, FAILURE_KINDS, LinkDown, ModelMismatch,
+    NoResponse, ProtocolError, TransportError)
 
 
 @dataclass
@@ -36,6 +36,7 @@ class BusTiming:
     backoff_max_s: float = 10.0
     frame_gap_s: float = 0.0
     command_timeout_s: float = 5.0
+    slow_reply_s: float = 0.0  # a valid reply slower than this counts as slow; 0 = off
 
 
 @dataclass
@@ -58,14 +59,16 @@ class DeviceStats:
     transactions: int = 0
     errors: Counter = field(default_factory=Counter)
     retries: int = 0
+    slow_replies: int = 0
     last_error: str = ''
     rtt_last_s: float = 0.0
     rtt_avg_s: float = 0.0
     rtt_max_s: float = 0.0
 
-    def record_ok(self, rtt_s: float) -> None:
-        """Count a transaction that got a valid reply."""
+    def record_ok(self, rtt_s: float, slow: bool = False) -> None:
+        """Count a transaction that got a valid reply (``slow``: later than the bus's limit)."""
         self.transactions += 1
+        self.slow_replies += slow
         self.rtt_last_s = rtt_s
         self.rtt_max_s = max(self.rtt_max_s, rtt_s)
         weight = 0.1 if self.rtt_avg_s else 1.0
@@ -83,12 +86,13 @@ class DeviceStats:
             'transactions': str(self.transactions),
             'errors': str(sum(self.errors.values())),
             'retries': str(self.retries),
+            'slow_replies': str(self.slow_replies),
             'last_error': self.last_error,
             'rtt_last_ms': f'{self.rtt_last_s * 1000:.1f}',
             'rtt_avg_ms': f'{self.rtt_avg_s * 1000:.1f}',
             'rtt_max_ms': f'{self.rtt_max_s * 1000:.1f}',
         }
-        for kind in ('timeout', 'bad_frame', 'exception', 'link'):
+        for kind in FAILURE_KINDS:
             values[f'errors_{kind}'] = str(self.errors.get(kind, 0))
         return values
 
@@ -151,6 +155,7 @@ class _Job:
     future: Future
     decode: Optional[Callable[[list], object]] = None
     on_acknowledged: Optional[Callable[[], None]] = None
+    on_failed: Optional[Callable[[], None]] = None
 
 
 class BusMaster:
@@ -334,7 +339,8 @@ class BusMaster:
         """Queue the writes of the profile's plan for ``command``."""
         plan = device.spec.profile.command_plan(command)
         self._enqueue(_Job(device, command, plan.writes, future,
-                           on_acknowledged=plan.on_acknowledged))
+                           on_acknowledged=plan.on_acknowledged,
+                           on_failed=plan.on_failed))
 
     def _enqueue(self, job: _Job) -> None:
         self._jobs.append(job)
@@ -483,12 +489,21 @@ class BusMaster:
         except TransportError as error:
             self._last_transaction_end_s = self.clock()
             with self._lock:
+                self._count_recovered(device)
                 device.stats.record_error(error)
             raise
         self._last_transaction_end_s = self.clock()
+        rtt_s = self._last_transaction_end_s - started
+        slow_s = self.timing.slow_reply_s
         with self._lock:
-            device.stats.record_ok(self._last_transaction_end_s - started)
+            self._count_recovered(device)
+            device.stats.record_ok(rtt_s, slow=0 < slow_s < rtt_s)
         return result
+
+    def _count_recovered(self, device: _Device) -> None:
+        """Add the failures the transport recovered from itself (AP ASCII NAKs) to the stats."""
+        for kind, count in getattr(self.transport, 'last_recovered', {}).items():
+            device.stats.errors[kind] += count
 
     def _poll(self, device: _Device) -> None:
         now = self.clock()
@@ -629,11 +644,13 @@ class BusMaster:
             for transaction in job.transactions:
                 results.append(self._transact(device, transaction))
         except DeviceException as error:
+            self._command_failed(job)
             job.future.set_exception(CommandRefused(
                 f'rejected by {name}: {self._explain(device, error)}'))
             return
         except TransportError as error:
             self._may_have_started(device, job.command)
+            self._command_failed(job)
             if isinstance(error, LinkDown):
                 self._link_lost(str(error), self.clock())
             job.future.set_exception(TransportError(
@@ -658,6 +675,12 @@ class BusMaster:
         else:
             job.future.set_result(
                 f'{job.command} acknowledged by {name} (address {device.spec.unit})')
+
+    def _command_failed(self, job: _Job) -> None:
+        """Let the profile settle what it rewrites each cycle after a failed command."""
+        if job.on_failed is not None:
+            with self._lock:
+                job.on_failed()
 
     def _explain(self, device: _Device, error: TransportError) -> str:
         """Return a failure in words; a device exception with the profile's text and detail."""

@@ -117,11 +117,15 @@ class CommandPlan:
 
     ``on_acknowledged`` runs on the bus thread once every write was acknowledged: a profile
     that keeps state (the drives' control word) commits it there, never before.
+    ``on_failed`` runs when a write was refused or got no valid reply (then the device may
+    or may not have executed it): a profile that rewrites its command every cycle must then
+    never rewrite a run over the stop that was asked for (it keeps the stop, drops a start).
     """
 
     command: str
     writes: Tuple[object, ...]
     on_acknowledged: Optional[Callable[[], None]] = None
+    on_failed: Optional[Callable[[], None]] = None
 
 
 @dataclass(frozen=True)

@@ -320,7 +320,13 @@ class DriveProfile:
             if command == 'start' and not self.commanded_run:
                 self.reached_reference = False
             self.control_word = word
-        return CommandPlan(command, writes, acknowledged)
+
+        def failed() -> None:
+            # A stop was asked for: the keepalive repeats it, never the old run word. A
+            # start that failed is not repeated: the keepalive keeps the old word.
+            if not fc_control.is_start(word):
+                self.control_word = word
+        return CommandPlan(command, writes, acknowledged, failed)
 
     def set_reference(self, percent: float) -> int:
         """Take a speed reference in percent (FC scaling); raise CommandRefused if invalid."""

@@ -267,8 +267,14 @@ class LvsgProfile:
         def acknowledged() -> None:
             self.control = steps[-1]
             self.commanded = True
+
+        def failed() -> None:
+            # A stop, quick stop or reset was asked for: the image rewritten each cycle keeps
+            # Fwd Run clear from now on. A start that failed is not repeated.
+            if command != 'start':
+                acknowledged()
         return CommandPlan(command, tuple(self.image_write(step) for step in steps),
-                           acknowledged)
+                           acknowledged, failed)
 
     def parameter_plan(self, number: int, value=None):
         """Refuse: the Profibus Module gives no parameter access (only parameters 1-4)."""

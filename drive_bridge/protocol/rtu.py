@@ -135,6 +135,7 @@ class ResponseResult:
     frame: Optional[RtuFrame] = None
     error: str = ''
     needed: int = MIN_RESPONSE_BYTES
+    error_kind: str = ''  # 'wrong_address', 'crc' or 'bad_frame' (anything else)
 
 
 def response_length(buffer: bytes) -> Optional[int]:
@@ -159,10 +160,11 @@ def decode_response(buffer: bytes, unit: int, function: int) -> ResponseResult:
     an ``error``; too few bytes is "need more" (``needed``).
     """
     if len(buffer) >= 1 and buffer[0] != unit:
-        return ResponseResult(error=f'reply from address {buffer[0]}, expected {unit}')
+        return ResponseResult(error=f'reply from address {buffer[0]}, expected {unit}',
+                              error_kind='wrong_address')
     if len(buffer) >= 2 and buffer[1] & 0x7F != function:
         return ResponseResult(error=f'reply with function {buffer[1]:02X}h to a '
-                                    f'{function:02X}h request')
+                                    f'{function:02X}h request', error_kind='bad_frame')
     length = response_length(buffer)
     if length is None:
         return ResponseResult(needed=max(len(buffer) + 1, 3))
@@ -170,9 +172,10 @@ def decode_response(buffer: bytes, unit: int, function: int) -> ResponseResult:
         return ResponseResult(needed=length)
     candidate = bytes(buffer[:length])
     if len(buffer) > length:
-        return ResponseResult(error=f'{len(buffer) - length} bytes after the reply')
+        return ResponseResult(error=f'{len(buffer) - length} bytes after the reply',
+                              error_kind='bad_frame')
     if not crc_ok(candidate):
-        return ResponseResult(error='CRC error')
+        return ResponseResult(error='CRC error', error_kind='crc')
     return ResponseResult(frame=RtuFrame(candidate[0], candidate[1], candidate[2:-2]),
                           needed=length)
 

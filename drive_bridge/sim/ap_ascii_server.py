@@ -9,20 +9,19 @@ address fragment, NAKs a fragment with a bad LRC, answers a refused command with
 stays silent for addresses it does not serve.
 """
 
-from collections import defaultdict, deque
 from dataclasses import dataclass
 import os
-import random
 import select
 import threading
 import time
-from typing import Deque, Dict, Optional
+from typing import Dict, Optional
 
 from drive_bridge.protocol import ap_ascii
+from drive_bridge.sim.faults import AP_ASCII_FAULTS, FaultInjector, FaultPlan
 from drive_bridge.sim.mcd_model import McdModel, ModuleError
 from drive_bridge.sim.pty_link import PtyLink
 
-FAULTS = ('nak', 'bel', 'silence', 'garbage')
+FAULTS = AP_ASCII_FAULTS
 _COMMAND_VALUES = {'B10': 1, 'B12': 2, 'B14': 3, 'B16': 4, 'B18': 5}
 STALE_PARTIAL_S = 0.1  # a partial fragment older than this is dropped
 
@@ -44,17 +43,17 @@ class ApAsciiSimServer:
     """Serve MCD models over AP ASCII on a pty, on a thread of its own."""
 
     def __init__(self, devices: Dict[int, McdModel], status_style: str = 'hex',
-                 lrc_includes_eot: Optional[bool] = None, seed: int = 1):
+                 lrc_includes_eot: Optional[bool] = None,
+                 fault_plan: Optional[FaultPlan] = None):
         self.devices = devices
         self.status_style = status_style
         self.lrc_includes_eot = lrc_includes_eot  # None: accept both
         self.lock = threading.RLock()
         self.stats = AsciiStats()
         self.silent_units: set = set()
-        self.faults: Dict[int, Deque[str]] = defaultdict(deque)
+        self.faults = FaultInjector(AP_ASCII_FAULTS, fault_plan)
         self.clock = time.monotonic
         self.pty_path = ''
-        self._random = random.Random(seed)
         self._pty: Optional[PtyLink] = None
         self._master = -1
         self._selected: Optional[int] = None
@@ -64,11 +63,8 @@ class ApAsciiSimServer:
         self._thread: Optional[threading.Thread] = None
 
     def inject(self, unit: int, fault: str, count: int = 1) -> None:
-        """Make the next ``count`` replies of ``unit`` a NAK, BEL, silence or garbage."""
-        if fault not in FAULTS:
-            raise ValueError(f'fault must be one of {", ".join(FAULTS)}')
-        with self.lock:
-            self.faults[unit].extend([fault] * count)
+        """Make the next ``count`` replies of ``unit`` a NAK, BEL, silence, garbage or slow."""
+        self.faults.inject(unit, fault, count)
 
     def open_pty(self, link_path: str = '') -> str:
         """Open a pty pair and serve on its master; return the slave's path."""
@@ -130,16 +126,19 @@ class ApAsciiSimServer:
                 return b''
             if not fragment.lrc_ok:
                 return self._count(bytes([ap_ascii.NAK]))
-            reply = self._with_fault(unit, bytes([ap_ascii.ACK]))
-            if reply == bytes([ap_ascii.ACK]):
+            fault = self.faults.draw(unit)
+            if fault is None or fault == 'slow':
                 self._selected = unit
-            return reply
+            return self._with_fault(fault, bytes([ap_ascii.ACK]))
         unit, self._selected = self._selected, None
         if unit is None:
             return b''
         if not fragment.lrc_ok:
             return self._count(bytes([ap_ascii.NAK]))
-        return self._with_fault(unit, self._execute(self.devices[unit], fragment.code))
+        fault = self.faults.draw(unit)
+        if fault in ('nak', 'bel'):  # the fragment is not acted on
+            return self._with_fault(fault, b'')
+        return self._with_fault(fault, self._execute(self.devices[unit], fragment.code))
 
     def _execute(self, model: McdModel, code: str) -> bytes:
         now = self.clock()
@@ -164,18 +163,17 @@ class ApAsciiSimServer:
             return ap_ascii.data_fragment(ap_ascii.encode_data(value))
         return bytes([ap_ascii.BEL])
 
-    def _with_fault(self, unit: int, reply: bytes) -> bytes:
-        queue = self.faults.get(unit)
-        if queue:
-            fault = queue.popleft()
-            self.stats.faults_injected += 1
-            reply = {'nak': bytes([ap_ascii.NAK]), 'bel': bytes([ap_ascii.BEL]),
-                     'silence': b'',
-                     'garbage': bytes(self._random.randrange(0x20, 0x7F) for _ in range(5)),
-                     }[fault]
-            if fault != 'garbage':
-                self._selected = None
-        return self._count(reply)
+    def _with_fault(self, fault: Optional[str], reply: bytes) -> bytes:
+        """Return ``reply``, or what replaces it for ``fault`` (a slow one after a delay)."""
+        if fault is None:
+            return self._count(reply)
+        self.stats.faults_injected += 1
+        if fault == 'slow':
+            time.sleep(self.faults.plan.slow_s)
+            return self._count(reply)
+        return self._count({
+            'nak': bytes([ap_ascii.NAK]), 'bel': bytes([ap_ascii.BEL]), 'silence': b'',
+            'garbage': self.faults.random_bytes(5, 0x20, 0x7E)}[fault])
 
     def _count(self, reply: bytes) -> bytes:
         kinds = {bytes([ap_ascii.ACK]): 'acks', bytes([ap_ascii.NAK]): 'naks',

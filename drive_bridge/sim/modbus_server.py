@@ -21,6 +21,8 @@ from typing import Callable, Dict, List, Optional, Protocol
 
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
+from drive_bridge.sim.faults import (
+    exception_reply, FaultInjector, mangle_rtu_reply, MBAP_FAULTS, MODBUS_FAULTS)
 from drive_bridge.sim.pty_link import PtyLink
 
 GATEWAY_TARGET_FAILED = 0x0B  # Modbus exception: gateway target device failed to respond
@@ -111,6 +113,7 @@ class ModbusSimServer:
         self.stats = LinkStats()
         self.silent_units: set = set()
         self.record_frames = False
+        self.faults = FaultInjector(MODBUS_FAULTS)
         # Optional fault hook: (unit, reply bytes) -> bytes to send instead, or None for silence.
         self.reply_hook: Optional[Callable[[int, bytes], Optional[bytes]]] = None
         self.pty_path = ''
@@ -232,22 +235,33 @@ class ModbusSimServer:
                     if result.error == 'CRC error':
                         self.stats.crc_errors += 1
                 continue
-            reply = self._answer(result.frame, raw)
+            fault = self._draw_fault(result.frame, MODBUS_FAULTS)
+            reply = self._answer(result.frame, raw, fault)
             if reply is None:
                 continue
             data = reply.encode()
             hook = self.reply_hook
             if hook is not None:
                 data = hook(reply.unit, data)
+            if fault is not None and data:
+                data = mangle_rtu_reply(fault, data, self.faults)
             if data:
-                self._send_rtu(connection, raw, data)
+                self._send_rtu(connection, raw, data, fault == 'slow')
 
-    def _send_rtu(self, connection: _Connection, request: bytes, reply: bytes) -> None:
+    def _draw_fault(self, frame: RtuFrame, usable: tuple) -> Optional[str]:
+        """Return the fault to inject into the reply to ``frame``, if the unit is served."""
+        if frame.unit not in self.devices or frame.unit in self.silent_units:
+            return None
+        return self.faults.draw(frame.unit, usable)
+
+    def _send_rtu(self, connection: _Connection, request: bytes, reply: bytes,
+                  slow: bool = False) -> None:
+        delay = self.faults.plan.slow_s if slow else 0.0
         if self.wire is not None:
             due = self.wire.reply_due(connection.first_byte_s, len(request), len(reply))
-            delay = due - self.clock()
-            if delay > 0:
-                time.sleep(delay)
+            delay += due - self.clock()
+        if delay > 0:
+            time.sleep(delay)
         connection.write(reply)
 
     def _process_mbap(self, connection: _Connection) -> None:
@@ -264,13 +278,19 @@ class ModbusSimServer:
             pdu = connection.buffer[7:6 + length]
             connection.buffer = connection.buffer[6 + length:]
             frame = RtuFrame(unit, pdu[0], bytes(pdu[1:]))
-            reply = self._answer(frame, frame.encode())
+            fault = self._draw_fault(frame, MBAP_FAULTS)
+            reply = self._answer(frame, frame.encode(), fault)
+            if fault == 'no_reply':  # the target executed, its reply was lost: 0Bh
+                reply = None
+            if fault == 'slow':
+                time.sleep(self.faults.plan.slow_s)
             if reply is None:
                 reply = rtu.exception_response(unit, frame.function, GATEWAY_TARGET_FAILED)
             body = bytes([reply.unit, reply.function]) + reply.data
             connection.write(struct.pack('>HHH', transaction, 0, len(body)) + body)
 
-    def _answer(self, frame: RtuFrame, raw: bytes) -> Optional[RtuFrame]:
+    def _answer(self, frame: RtuFrame, raw: bytes,
+                fault: Optional[str] = None) -> Optional[RtuFrame]:
         with self.lock:
             self.stats.requests += 1
             if self.record_frames:
@@ -279,6 +299,8 @@ class ModbusSimServer:
             if device is None or frame.unit in self.silent_units:
                 self.stats.unserved += 1
                 return None
+            if fault == 'exception':  # busy: the request is not executed
+                return exception_reply(frame)
             reply = device.handle(frame, self.clock())
             if reply is not None:
                 self.stats.replies += 1

@@ -8,7 +8,7 @@ silence is NoResponse (an unknown address never answers); anything else is BadFr
 """
 
 import time
-from typing import Callable, Optional
+from typing import Callable, Dict, Optional
 
 from drive_bridge.devices.base import AsciiCommand, AsciiRequest
 from drive_bridge.errors import BadFrame, DeviceException, NoResponse
@@ -21,6 +21,8 @@ import serial
 class Nak(BadFrame):
     """The slave answered NAK: it saw a bad LRC and did not act on the fragment."""
 
+    kind = 'nak'
+
 
 class ApAsciiTransport(SerialPortTransport):
     """Run AP ASCII transactions on one serial line (8N1); the bus thread owns it."""
@@ -32,6 +34,7 @@ class ApAsciiTransport(SerialPortTransport):
         self.nak_retries = nak_retries
         self.address_lrc_includes_eot = address_lrc_includes_eot
         self.naks = 0  # NAKs seen (each one retried or reported)
+        self.last_recovered: Dict[str, int] = {}  # NAKs retried in the last transaction
 
     def framing(self) -> tuple:
         """Return (parity, stop bits): AP ASCII is always 8N1."""
@@ -49,14 +52,16 @@ class ApAsciiTransport(SerialPortTransport):
 
     def _with_nak_retries(self, unit: int, transaction) -> Optional[int]:
         attempt = 0
+        self.last_recovered = {}
         while True:
             try:
                 return self._exchange(unit, transaction)
             except Nak as error:
                 self.naks += 1
                 if attempt >= self.nak_retries:
-                    raise BadFrame(f'{error} ({attempt + 1} attempts)') from None
+                    raise Nak(f'{error} ({attempt + 1} attempts)') from None
                 attempt += 1
+                self.last_recovered = {'nak': attempt}
 
     def _exchange(self, unit: int, transaction) -> Optional[int]:
         self._send(ap_ascii.address_fragment(unit, self.address_lrc_includes_eot))

@@ -14,7 +14,8 @@ from typing import Callable, Dict, List, Optional
 
 from drive_bridge.devices.base import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
-from drive_bridge.errors import BadFrame, DeviceException, NoResponse
+from drive_bridge.errors import (
+    BadFrame, CrcError, DeviceException, NoResponse, TruncatedFrame, WrongAddress)
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
@@ -57,6 +58,7 @@ def _coils(transaction: ReadCoils, reply: RtuFrame) -> List[bool]:
 
 
 _PARSERS: Dict[type, Callable] = {ReadRegisters: _registers, ReadCoils: _coils}
+_INVALID_REPLY = {'crc': CrcError, 'wrong_address': WrongAddress}
 
 
 class RtuSerialTransport(SerialPortTransport):
@@ -102,12 +104,14 @@ class RtuSerialTransport(SerialPortTransport):
                 return result.frame
             if result.error:
                 self._drain()
-                raise BadFrame(f'invalid reply ({result.error}), {len(buffer)} bytes received')
+                error_type = _INVALID_REPLY.get(result.error_kind, BadFrame)
+                raise error_type(f'invalid reply ({result.error}), {len(buffer)} bytes '
+                                 'received')
             if len(buffer) < needed:  # the deadline passed
                 if not buffer:
                     raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
-                raise BadFrame(f'truncated reply: {len(buffer)} of {needed} bytes within '
-                               f'{self.settings.timeout_s:g} s')
+                raise TruncatedFrame(f'truncated reply: {len(buffer)} of {needed} bytes '
+                                     f'within {self.settings.timeout_s:g} s')
             needed = result.needed
 
     def _drain(self) -> None:

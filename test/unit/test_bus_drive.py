@@ -162,3 +162,57 @@ def test_a_refused_setup_write_is_reported_not_fatal():
     assert 'set-up write' in snapshot.stats['setup_error']
     assert 'register 7 = 17' in snapshot.stats['setup_error']
     assert [e.kind for e in events if 'set-up' in e.message] == ['notice']
+
+
+class LosesOneReply(FakeDrive):
+    """A drive that executes the next write but whose reply is lost (or refused)."""
+
+    def __init__(self, clock):
+        super().__init__(clock)
+        self.fail_next_write_with = None
+
+    def execute(self, unit, transaction):
+        error, self.fail_next_write_with = (
+            (self.fail_next_write_with, None) if isinstance(transaction, WriteCoils)
+            else (None, self.fail_next_write_with))
+        result = super().execute(unit, transaction)
+        if error is not None:
+            raise error
+        return result
+
+
+@pytest.mark.parametrize('failure', [NoResponse('no reply'), DeviceException(6)])
+def test_a_failed_stop_is_kept_by_the_keepalive_never_the_old_run_word(failure):
+    clock = FakeClock()
+    drive = LosesOneReply(clock)
+    spec = DeviceSpec('conv', 1, DriveProfile(fc.DATA, 'fc51'), poll_rate_hz=10.0)
+    bus = BusMaster(drive, [spec], BusTiming(retries=0), clock=clock, sleep=clock.sleep)
+    run_for(bus, clock, 0.5)
+    bus.submit_command('conv', 'start')
+    run_for(bus, clock, 0.5)
+    drive.fail_next_write_with = failure
+    future = bus.submit_command('conv', 'stop')
+    run_for(bus, clock, 1.0)
+    assert future.exception() is not None  # reported as failed
+    sent = control_words(drive)
+    stop_at = sent.index(0x043C)
+    assert stop_at > 0 and sent[stop_at:] == [0x043C] * len(sent[stop_at:])
+    assert len(sent[stop_at:]) >= 5  # and repeated by the keepalive
+
+
+def test_a_failed_start_is_not_repeated_the_keepalive_keeps_the_stop():
+    clock = FakeClock()
+    drive = LosesOneReply(clock)
+    spec = DeviceSpec('conv', 1, DriveProfile(fc.DATA, 'fc51'), poll_rate_hz=10.0)
+    bus = BusMaster(drive, [spec], BusTiming(retries=0), clock=clock, sleep=clock.sleep)
+    run_for(bus, clock, 0.5)
+    bus.submit_command('conv', 'stop')
+    run_for(bus, clock, 0.5)
+    drive.fail_next_write_with = NoResponse('no reply')
+    future = bus.submit_command('conv', 'start')
+    run_for(bus, clock, 1.0)
+    assert 'may or may not have been executed' in str(future.exception())
+    sent = control_words(drive)
+    assert sent.count(0x047C) == 1  # the start went out once
+    assert sent[sent.index(0x047C) + 1:] and set(sent[sent.index(0x047C) + 1:]) == {0x043C}
+    assert bus.snapshot('conv').started_by_bridge  # so a shutdown still stops it

@@ -149,3 +149,19 @@ def test_wrong_product_type_is_a_model_mismatch():
     poll(profile, answer(0, 0))
     with pytest.raises(ModelMismatch, match='product type 7'):
         poll(profile, answer(1, (7 << 3) << 8))
+
+
+def test_a_failed_stop_clears_fwd_run_in_the_rewritten_image_a_failed_start_does_not_set_it():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100)
+    poll(profile, answer(0, 0))
+    profile.command_plan('start').on_acknowledged()
+    poll(profile, answer(0, 0, ready=False, on=True))
+    for command in ('stop', 'quick_stop', 'reset'):
+        profile.command_plan('start').on_acknowledged()
+        profile.command_plan(command).on_failed()  # refused, or no reply: it may have run
+        assert profile.control.fwd_run is False, command
+        items, _ = poll(profile, answer(0, 0, ready=False, on=True))
+        written = words.registers_to_bytes(list(items[0].transaction.values), 3)
+        assert written[0] & 0x01 == 0  # the rewritten image carries no Fwd Run
+    profile.command_plan('start').on_failed()
+    assert profile.control.fwd_run is False  # a failed start is not repeated
