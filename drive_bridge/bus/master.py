@@ -219,6 +219,11 @@ class BusMaster:
             stats['reference_timeout_s'] = f'{device.spec.reference_timeout_s:g}'
         return stats
 
+    def transaction_count(self) -> int:
+        """Return the transactions run on this bus so far, every device together."""
+        with self._lock:
+            return sum(device.stats.transactions for device in self._devices.values())
+
     def set_allow_control(self, name: str, allow: bool) -> None:
         """Switch a device between controlled and monitor-only."""
         with self._lock:
@@ -359,12 +364,26 @@ class BusMaster:
             try:
                 wait_s = self.run_once()
             except Exception as error:  # noqa: B902 - the bus thread must never die
-                self.internal_errors += 1
-                self.last_internal_error = f'{type(error).__name__}: {error}'
-                wait_s = 0.1
+                wait_s = self._internal_error(error)
             if wait_s > 0 and self._running:
                 self._wake.wait(wait_s)
                 self._wake.clear()
+
+    def _internal_error(self, error: Exception) -> float:
+        """
+        Survive a bug or an unexpected library error: report the bus offline and reopen it.
+
+        Nothing read since is trusted: every device goes offline at once (listeners are
+        told) and the link is reopened with backoff, as after a lost port.
+        """
+        self.internal_errors += 1
+        self.last_internal_error = f'{type(error).__name__}: {error}'
+        try:
+            self._link_lost(f'bus offline: internal error ({self.last_internal_error}); '
+                            'reopening the link', self.clock())
+        except Exception:  # noqa: B902 - the bus thread must never die
+            pass
+        return 0.1
 
     def shutdown(self, stop_motors: bool = True, timeout_s: float = 3.0) -> List[str]:
         """

@@ -92,12 +92,21 @@ class LvsgProfile:
         if self.control is None:
             items.append(PollItem(ReadRegisters(self.output_register, self.output_registers),
                                   'output', optional=True))
-        elif self.extended or self.commanded:
+        elif self.commanded:
             items.append(PollItem(self.image_write(self.control), 'write'))
+        elif self.extended:  # no command yet: the parameter request alone, never control
+            items.append(PollItem(self.request_write(), 'write'))
         items.append(PollItem(ReadRegisters(self.input_register, self.input_registers),
                               'input'))
         self._keys = [item.key for item in items]
         return items
+
+    def request_write(self) -> WriteRegister:
+        """Return the write of the register holding the parameter request (output byte 2)."""
+        registers = bytes_to_registers(
+            replace(self.control or Control(), parameter_request=self.request).encode(True),
+            self.byte_order)
+        return WriteRegister(self.output_register + 1, registers[1])
 
     def image_write(self, control: Control):
         """Return the write of the whole output image carrying ``control``."""

@@ -93,6 +93,8 @@ class Control:
     @classmethod
     def decode(cls, data: bytes) -> 'Control':
         """Return the control bits of output bytes (a gateway's image read back)."""
+        if len(data) < BASIC_OUTPUT_BYTES:
+            raise ValueError(f'LVSG output has {len(data)} bytes: expected 2 or 3')
         return cls(fwd_run=bit(data[0], CONTROL_FWD_RUN[1]), reset=bit(data[0], CONTROL_RESET[1]),
                    quick_stop=bit(data[1], CONTROL_QUICK_STOP[1]),
                    parameter_request=data[2] if len(data) > 2 else 0)

@@ -166,28 +166,33 @@ class LvsgGatewaySim:
             return rtu.exception_response(frame.unit, frame.function, error.code)
 
     def _area(self, address: int, count: int):
+        """Return (slave, 'input' or 'output', register offset) of a register range."""
         for slave in self.slaves:
             for start, size, kind in ((slave.input_register, slave.input_bytes, 'input'),
                                       (slave.output_register, slave.output_bytes, 'output')):
-                if address == start and 1 <= count <= (size + 1) // 2:
-                    return slave, kind
+                offset = address - start
+                if 0 <= offset and count >= 1 and offset + count <= (size + 1) // 2:
+                    return slave, kind, offset
         raise _Exception(ILLEGAL_ADDRESS)
 
     def _read(self, address: int, count: int, now_s: float) -> List[int]:
-        slave, kind = self._area(address, count)
+        slave, kind, offset = self._area(address, count)
         if kind == 'input':
             data = slave.input_image(now_s)
         else:
             data = slave.control.encode(slave.extended)
-        return bytes_to_registers(data, slave.byte_order)[:count]
+        return bytes_to_registers(data, slave.byte_order)[offset:offset + count]
 
     def _write(self, address: int, values: List[int], now_s: float) -> None:
-        slave, kind = self._area(address, len(values))
-        if kind != 'output' or len(values) != (slave.output_bytes + 1) // 2:
+        """Write output registers; a part of the image keeps the other registers' bytes."""
+        slave, kind, offset = self._area(address, len(values))
+        if kind != 'output':
             raise _Exception(ILLEGAL_ADDRESS)
         if slave.clear_mode and self.modbus_watchdog_s:
             slave.set_clear_mode(False, now_s)  # the Modbus side is back
-        slave.write_output(registers_to_bytes(values, slave.output_bytes, slave.byte_order),
+        registers = bytes_to_registers(slave.control.encode(slave.extended), slave.byte_order)
+        registers[offset:offset + len(values)] = values
+        slave.write_output(registers_to_bytes(registers, slave.output_bytes, slave.byte_order),
                            now_s)
 
     def _watchdog(self, now_s: float) -> None:

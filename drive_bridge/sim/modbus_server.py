@@ -125,6 +125,8 @@ class ModbusSimServer:
         self._selector.register(self._wake_r, selectors.EVENT_READ, None)
         self._thread: Optional[threading.Thread] = None
         self._running = False
+        self._loop_actions: List[tuple] = []
+        self._unplugged_links: List[str] = []
 
     # -- endpoints ----------------------------------------------------------------------
     def open_pty(self, link_path: str = '') -> str:
@@ -149,6 +151,63 @@ class ModbusSimServer:
         self.tcp_port = listener.getsockname()[1]
         self._listeners[listener.fileno()] = (listener, framing)
         return self.tcp_port
+
+    # -- faults of the line itself ------------------------------------------------------
+    def unplug(self) -> None:
+        """Close every pty, as a USB adapter pulled out: the port and its symlink vanish."""
+        self._in_loop(self._close_ptys)
+
+    def replug(self) -> str:
+        """Open a new pty at the same symlink after :meth:`unplug`; return the new path."""
+        links = self._unplugged_links
+        self._unplugged_links = []
+        for link in links or ['']:
+            self._in_loop(lambda link=link: self.open_pty(link))
+        return self.pty_path
+
+    def close_tcp(self) -> None:
+        """Close the TCP listeners and every client connection, as a gateway restarting."""
+        self._in_loop(self._close_sockets)
+
+    def power_off(self, unit: int) -> None:
+        """Switch a device off: it stays silent until :meth:`power_on`."""
+        with self.lock:
+            self.silent_units.add(unit)
+
+    def power_on(self, unit: int, device: SimDevice) -> None:
+        """Switch a device back on as ``device`` (a fresh one: volatile settings lost)."""
+        with self.lock:
+            self.devices[unit] = device
+            self.silent_units.discard(unit)
+
+    def _in_loop(self, action: Callable[[], None]) -> None:
+        """Run ``action`` on the serving thread (the selector is not shared) and wait."""
+        if self._thread is None or not self._thread.is_alive():
+            action()
+            return
+        done = threading.Event()
+        self._loop_actions.append((action, done))
+        os.write(self._wake_w, b'x')
+        done.wait(5.0)
+
+    def _close_ptys(self) -> None:
+        for pty in self._ptys:
+            self._forget(pty.master)
+            self._unplugged_links.append(pty.link_path)
+            pty.close()
+        self._ptys = []
+
+    def _close_sockets(self) -> None:
+        for key in list(self._selector.get_map().values()):
+            if isinstance(key.fileobj, socket.socket):
+                self._close_key(key)
+        self._listeners.clear()
+
+    def _forget(self, fileobj) -> None:
+        try:
+            self._selector.unregister(fileobj)
+        except (KeyError, ValueError):
+            pass
 
     # -- thread -------------------------------------------------------------------------
     def start(self) -> 'ModbusSimServer':
@@ -182,6 +241,10 @@ class ModbusSimServer:
 
     def _serve(self) -> None:
         while self._running:
+            while self._loop_actions:
+                action, done = self._loop_actions.pop(0)
+                action()
+                done.set()
             events = self._selector.select(timeout=0.005)
             now = self.clock()
             for key, _ in events:

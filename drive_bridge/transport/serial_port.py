@@ -9,7 +9,12 @@ import serial
 
 PARITIES = {'N': serial.PARITY_NONE, 'E': serial.PARITY_EVEN, 'O': serial.PARITY_ODD}
 STOPBITS = {1: serial.STOPBITS_ONE, 2: serial.STOPBITS_TWO}
-PORT_ERRORS = (serial.SerialException, OSError)
+try:  # tcflush on a port whose adapter was unplugged raises termios.error, not OSError
+    from termios import error as TermiosError
+except ImportError:  # not POSIX
+    class TermiosError(Exception):
+        """Placeholder where termios does not exist."""
+PORT_ERRORS = (serial.SerialException, OSError, TermiosError)
 
 
 class SerialPortTransport:

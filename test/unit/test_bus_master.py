@@ -226,3 +226,20 @@ def test_statistics_count_transactions_and_round_trip():
     stats = bus.snapshot('d1').stats
     assert int(stats['transactions']) >= 5
     assert stats['rtt_avg_ms'] == '20.0' and stats['errors'] == '0'
+
+
+def test_an_unexpected_error_on_the_bus_thread_reports_the_bus_offline_and_reopens_it():
+    bus, transport, clock, events = make_bus([20])
+    run_for(bus, clock, 0.5)
+    assert bus.snapshot('d20').online is True
+    transport.failures[20] = RuntimeError('termios said no')  # not a TransportError
+    with pytest.raises(RuntimeError) as raised:
+        for _ in range(100):
+            clock.sleep(bus.run_once())
+    wait_s = bus._internal_error(raised.value)  # what the bus thread does with it
+    assert wait_s > 0 and bus.internal_errors == 1 and not transport.connected
+    offline = [event for event in events if event.kind == 'offline']
+    assert offline and 'internal error (RuntimeError: termios said no)' in offline[0].message
+    transport.failures.clear()
+    run_for(bus, clock, 2.0)
+    assert bus.snapshot('d20').online is True  # reopened with backoff, polled again

@@ -83,8 +83,8 @@ def test_first_poll_reads_the_output_image_back_then_cycles_parameters():
     for parameter in (1, 2, 3, 4):
         items, reading = poll(profile, answer(parameter, values[parameter]))
         assert items[0].key == 'write'
-        requested = words.registers_to_bytes(list(items[0].transaction.values), 3)[2]
-        assert requested == parameter
+        # No command yet: only the register with the parameter request, never the control.
+        assert items[0].transaction == WriteRegister(101, parameter << 8)
     assert profile.model == 'mcd201'  # current 2222 and temperature 111 are its placeholders
     assert reading.motor_current_a is None and reading.state == 'ready'
 

@@ -1,0 +1,15 @@
+"""Twenty reconnect cycles in a row per drill: unplugged adapter, power cycle, gateway restart."""
+
+from drive_bridge.tools.reconnect import DRILLS, run_drill
+import pytest
+
+
+@pytest.mark.parametrize('drill', DRILLS)
+def test_twenty_cycles_recover_without_restart_and_resend_set_up(drill):
+    report = run_drill(drill, cycles=20)
+    print(report.line())
+    assert report.failures == [], report.line()
+    assert len(report.recover_s) == 20
+    # backoff_max is 0.5 s in the drill: a recovery takes one backoff period and a poll.
+    assert max(report.recover_s) < 2.0, report.line()
+    assert max(report.detect_s) < 2.0, report.line()
