@@ -47,7 +47,7 @@ VALID_REPLIES = [
 
 @st.composite
 def mutated(draw, frames):
-    """A valid frame with bytes flipped, cut, inserted or appended."""
+    """Return a valid frame with bytes flipped, cut, inserted or appended."""
     frame = bytearray(draw(st.sampled_from(frames)))
     for _ in range(draw(st.integers(0, 4))):
         action = draw(st.sampled_from(['flip', 'cut', 'insert', 'append']))
