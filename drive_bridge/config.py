@@ -341,3 +341,33 @@ def _check_unique_addresses(devices: List[DeviceConfig]) -> None:
             raise ConfigError(f'parameter {device.name + ".address"!r} = {device.address}'
                               f'{where} is also the address of {other!r}: addresses must be '
                               'unique')
+
+
+def check_params_files(argv: List[str]) -> None:
+    """
+    Raise ConfigError, in one line, for a ``--params-file`` that is missing or not YAML.
+
+    rcl would refuse it too, with a traceback and a parser location; this says which file
+    and why, before anything starts.
+    """
+    import yaml  # pyyaml: with every ROS install
+    for position, argument in enumerate(argv):
+        if argument != '--params-file' or position + 1 >= len(argv):
+            continue
+        path = argv[position + 1]
+        try:
+            with open(path) as stream:
+                content = yaml.safe_load(stream)
+        except OSError as error:
+            raise ConfigError(f'cannot read the parameters file {path}: '
+                              f'{error.strerror}') from None
+        except yaml.YAMLError as error:
+            where = getattr(error, 'problem_mark', None)
+            line = f' at line {where.line + 1}' if where is not None else ''
+            raise ConfigError(f'the parameters file {path} is not valid YAML{line}: '
+                              f'{getattr(error, "problem", None) or error}') from None
+        if not isinstance(content, dict) or not all(
+                isinstance(block, dict) and isinstance(block.get('ros__parameters'), dict)
+                for block in content.values()):
+            raise ConfigError(f'the parameters file {path} must map a node name (such as '
+                              '/**/drive_bridge) to a ros__parameters block')

@@ -330,6 +330,11 @@ def _reading_values(reading) -> Dict[str, str]:
 
 def main(args: Optional[List[str]] = None) -> int:
     """Run the node until SIGINT/SIGTERM; exit 2 with one line on a configuration error."""
+    try:
+        cfg.check_params_files(sys.argv if args is None else args)
+    except ConfigError as error:
+        print(f'[drive_bridge] configuration error: {error}', file=sys.stderr, flush=True)
+        return 2
     rclpy.init(args=args)
     node: Optional[DriveBridgeNode] = None
     exit_code = 0
