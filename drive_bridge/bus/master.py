@@ -393,7 +393,7 @@ class BusMaster:
         """
         outcomes = []
         if stop_motors and self._thread is not None:
-            outcomes = self._stop_started_motors(timeout_s)
+            outcomes = self.stop_started_motors(timeout_s)
         self._running = False
         self._wake.set()
         if self._thread is not None:
@@ -401,7 +401,8 @@ class BusMaster:
         self.transport.close()
         return outcomes
 
-    def _stop_started_motors(self, timeout_s: float) -> List[str]:
+    def stop_started_motors(self, timeout_s: float = 3.0) -> List[str]:
+        """Stop the motors this bridge started (stop_on_shutdown); return the outcomes."""
         with self._lock:
             names = [name for name, device in self._devices.items()
                      if device.started_by_bridge and device.spec.stop_on_shutdown]

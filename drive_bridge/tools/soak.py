@@ -75,6 +75,7 @@ class SoakReport:
     commands: Counter = field(default_factory=Counter)  # outcome -> count
     injected: Counter = field(default_factory=Counter)  # fault kind -> count
     counted: Counter = field(default_factory=Counter)  # the same kinds, from bus statistics
+    mismatches: List[str] = field(default_factory=list)  # per device, with its last error
     offline_events: int = 0
     longest_gap_online_s: float = 0.0
     longest_gap_s: float = 0.0
@@ -105,6 +106,7 @@ class SoakReport:
             mark = 'ok' if self.counted[kind] == self.injected[kind] else 'MISMATCH'
             lines.append(f'  {kind:14s} {self.injected[kind]:6d} -> {counted_as:14s} '
                          f'{self.counted[kind]:6d}  {mark}')
+        lines += [f'  {text}' for text in self.mismatches]
         lines += [
             f'healthy devices marked offline (faults in a row): {self.offline_events}',
             f'longest gap between polls of a healthy device while online: '
@@ -413,9 +415,16 @@ def _fill_report(report: SoakReport, master: BusMaster, server: ModbusSimServer,
     report.injected = server.faults.totals()
     for name in healthy:
         stats = master.snapshot(name).stats  # what /diagnostics shows
+        unit = DEVICES[name][0]['address']
         for kind, counted_as in COUNTED_AS.items():
             key = 'slow_replies' if counted_as == 'slow' else f'errors_{counted_as}'
-            report.counted[kind] += int(stats[key])
+            counted = int(stats[key])
+            report.counted[kind] += counted
+            injected = server.faults.injected[(unit, kind)]
+            if counted != injected:
+                report.mismatches.append(f'{name}: {kind} injected {injected}, counted '
+                                         f'{counted} ({counted_as}); last error: '
+                                         f'{stats["last_error"]}')
     report.offline_events = offline.events
     for name in healthy:
         unit = DEVICES[name][0]['address']
