@@ -25,6 +25,7 @@ setup(
         'console_scripts': [
             'drive_bridge_node = drive_bridge.ros.node:main',
             'drive_bridge_sim = drive_bridge.sim.cli:main',
+            'drive-bridge = drive_bridge.tools.cli:main',
         ],
     },
 )

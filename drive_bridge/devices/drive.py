@@ -58,6 +58,7 @@ class DriveFamilyData:
     text_read_index: Optional[int] = None  # VLT: IND = 0x0400 before a text read
     text_write_index: Optional[int] = None  # VLT: IND = 0x0500 before a text write
     parameter_label: Callable[[int], str] = str  # how the manual writes a number (16-14)
+    is_setting: Callable[[int], bool] = lambda number: True  # not a readout: backed up
 
     def spec(self, number: int, data_type: Optional[str] = None,
              conversion: Optional[int] = None) -> ParameterSpec:

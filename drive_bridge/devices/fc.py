@@ -156,4 +156,5 @@ DATA = DriveFamilyData(
     index_register=REGISTER_INDEX, eeprom_coil=COIL_EEPROM,
     identify_parameter=1540, version_parameter=1543, model_from_type=model_from_type,
     timeout_time_parameter=803, timeout_function_parameter=804,
-    parameter_label=parameter_label)
+    parameter_label=parameter_label,
+    is_setting=lambda number: number // 100 not in (15, 16))  # groups 15/16: read-only info

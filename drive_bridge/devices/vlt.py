@@ -88,4 +88,5 @@ DATA = DriveFamilyData(
     extended_status_bits={}, explain_exception=explain_exception,
     index_register=REGISTER_IND, eeprom_coil=COIL_EEPROM,
     timeout_register=REGISTER_MODBUS_TIMEOUT, drive_link_timeout_register=REGISTER_DRIVE_TIMEOUT,
-    text_read_index=TEXT_READ_INDEX, text_write_index=TEXT_WRITE_INDEX)
+    text_read_index=TEXT_READ_INDEX, text_write_index=TEXT_WRITE_INDEX,
+    is_setting=lambda number: not 500 <= number < 600 and number != 953)  # 5xx: readouts
