@@ -371,3 +371,25 @@ def check_params_files(argv: List[str]) -> None:
                 for block in content.values()):
             raise ConfigError(f'the parameters file {path} must map a node name (such as '
                               '/**/drive_bridge) to a ros__parameters block')
+
+
+def write_params_file(path: str, bus: Dict[str, Any], devices: Dict[str, Dict[str, Any]],
+                      node_key: str = '/**/drive_bridge') -> str:
+    """
+    Write a node parameters file (bus settings, ``devices`` and one block per device).
+
+    Every string is quoted, as ROS's YAML parser needs (an unquoted N is false there).
+    """
+    import yaml
+
+    class QuotingDumper(yaml.SafeDumper):
+        """Quote every string."""
+
+    QuotingDumper.add_representer(
+        str, lambda dumper, value: dumper.represent_scalar('tag:yaml.org,2002:str', value,
+                                                           style="'"))
+    parameters = dict(bus, devices=list(devices), **devices)
+    with open(path, 'w') as stream:
+        yaml.dump({node_key: {'ros__parameters': parameters}}, stream, Dumper=QuotingDumper,
+                  sort_keys=False)
+    return str(path)

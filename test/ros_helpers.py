@@ -9,6 +9,7 @@ import time
 from typing import Dict, List
 
 from diagnostic_msgs.msg import DiagnosticArray
+from drive_bridge.config import write_params_file
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 import rclpy
@@ -16,28 +17,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import Float32, String, UInt16, UInt32
 from std_srvs.srv import Trigger
 
-import yaml  # noqa: I100 - pyyaml comes with the ROS wheels
-
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-class _QuotingDumper(yaml.SafeDumper):
-    """Quote every string, as users must (an unquoted N is YAML false)."""
-
-
-_QuotingDumper.add_representer(
-    str, lambda dumper, value: dumper.represent_scalar('tag:yaml.org,2002:str', value,
-                                                       style="'"))
 
 
 def write_params(path, bus: Dict, devices: Dict[str, Dict]) -> str:
     """Write a params file for the node and return its path."""
-    parameters = {**bus, 'devices': list(devices)}
-    parameters.update(devices)
-    with open(path, 'w') as stream:
-        yaml.dump({'/**/drive_bridge': {'ros__parameters': parameters}}, stream,
-                  Dumper=_QuotingDumper)
-    return str(path)
+    return write_params_file(str(path), bus, devices)
 
 
 def start_node(params_file: str, namespace: str = '') -> subprocess.Popen:
