@@ -14,8 +14,10 @@ setup(
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+        (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5'],
+    tests_require=['pytest'],  # colcon test runs pytest when this names it
     zip_safe=True,
     maintainer='drive_bridge developers',
     maintainer_email='dev@drive-bridge.invalid',

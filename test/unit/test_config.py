@@ -84,8 +84,13 @@ def test_make_spec_builds_the_profile():
     assert spec.profile.configured_model == 'mcd500'
 
 
-@pytest.mark.parametrize('path', sorted(glob.glob(os.path.join(
-    os.path.dirname(__file__), '..', '..', 'config', '*.yaml'))))
+CONFIG_DIR = os.path.join(os.path.dirname(__file__), '..', '..', 'config')
+AGGREGATOR = 'diagnostic_aggregator.yaml'
+
+
+@pytest.mark.parametrize('path', sorted(
+    path for path in glob.glob(os.path.join(CONFIG_DIR, '*.yaml'))
+    if not path.endswith(AGGREGATOR)))
 def test_shipped_config_files_are_valid(path):
     with open(path) as stream:
         parameters = yaml.safe_load(stream)['/**/drive_bridge']['ros__parameters']
@@ -120,3 +125,12 @@ def test_drive_config_sets_the_reference():
                                    'reference_timeout': 1.5}})
     spec = built.devices[0].make_spec()
     assert spec.profile.reference_word == 0x1999 and spec.reference_timeout_s == 1.5
+
+
+def test_aggregator_config_groups_every_drive_bridge_status():
+    with open(os.path.join(CONFIG_DIR, AGGREGATOR)) as stream:
+        parameters = yaml.safe_load(stream)['/**/analyzers']['ros__parameters']
+    group = parameters['drives']
+    assert group['type'] == 'diagnostic_aggregator/GenericAnalyzer'
+    # The node names each status 'drive_bridge: <device>' (see ros/node.py).
+    assert group['startswith'] == ['drive_bridge: ']

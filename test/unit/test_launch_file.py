@@ -1,0 +1,69 @@
+"""
+The launch file, loaded with stand-ins for launch and launch_ros (not on PyPI).
+
+On an apt install the real modules exist and ``ros2 launch`` runs it; here the stand-ins
+record what the file asks for, so a wrong package, executable, argument or config path
+fails this test.
+"""
+
+import importlib.util
+import os
+import sys
+import types
+
+import pytest
+
+ROOT = os.path.join(os.path.dirname(__file__), '..', '..')
+
+
+class Recorded:
+    """A stand-in action or substitution that keeps its arguments."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+def _module(name: str, **attributes) -> types.ModuleType:
+    module = types.ModuleType(name)
+    module.__dict__.update(attributes)
+    return module
+
+
+@pytest.fixture
+def launch_description(monkeypatch):
+    stand_ins = {
+        'launch': _module('launch', LaunchDescription=Recorded),
+        'launch.actions': _module('launch.actions', DeclareLaunchArgument=Recorded),
+        'launch.conditions': _module('launch.conditions', IfCondition=Recorded),
+        'launch.substitutions': _module('launch.substitutions', LaunchConfiguration=Recorded),
+        'launch_ros': _module('launch_ros'),
+        'launch_ros.actions': _module('launch_ros.actions', LifecycleNode=Recorded,
+                                      Node=Recorded),
+        'ament_index_python.packages': _module(
+            'ament_index_python.packages',
+            get_package_share_directory=lambda package: os.path.abspath(ROOT)),
+    }
+    for name, module in stand_ins.items():
+        monkeypatch.setitem(sys.modules, name, module)
+    path = os.path.join(ROOT, 'launch', 'drive_bridge.launch.py')
+    spec = importlib.util.spec_from_file_location('drive_bridge_launch', path)
+    launch_file = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(launch_file)
+    return launch_file.generate_launch_description()
+
+
+def test_launch_file_starts_the_lifecycle_node_with_the_params_file(launch_description):
+    actions = launch_description.args[0]
+    arguments = {action.args[0]: action.kwargs['default_value'] for action in actions
+                 if 'default_value' in action.kwargs}
+    assert set(arguments) == {'params_file', 'namespace', 'aggregator'}
+    assert os.path.exists(arguments['params_file'])  # config/mcd.yaml in the share dir
+    node = next(action for action in actions if action.kwargs.get('package') == 'drive_bridge')
+    assert node.kwargs['executable'] == 'drive_bridge_node'
+    assert node.kwargs['name'] == 'drive_bridge'
+    assert node.kwargs['parameters'][0].args == ('params_file',)
+    aggregator = next(action for action in actions
+                      if action.kwargs.get('package') == 'diagnostic_aggregator')
+    assert aggregator.kwargs['executable'] == 'aggregator_node'
+    assert os.path.exists(aggregator.kwargs['parameters'][0])
+    assert aggregator.kwargs['condition'].args[0].args == ('aggregator',)
