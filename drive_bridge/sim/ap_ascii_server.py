@@ -57,6 +57,7 @@ class ApAsciiSimServer:
         self._pty: Optional[PtyLink] = None
         self._master = -1
         self._selected: Optional[int] = None
+        self._message_fault: Optional[str] = None
         self._buffer = b''
         self._last_byte_s = 0.0
         self._running = False
@@ -126,7 +127,13 @@ class ApAsciiSimServer:
                 return b''
             if not fragment.lrc_ok:
                 return self._count(bytes([ap_ascii.NAK]))
+            # A random fault goes to the address or the message fragment, at most one an
+            # exchange; an injected one to the next reply, as inject() says.
             fault = self.faults.draw(unit)
+            self._message_fault = None
+            if fault is not None and not self.faults.last_queued and \
+                    self.faults.random_int(0, 1):
+                fault, self._message_fault = None, fault
             if fault is None or fault == 'slow':
                 self._selected = unit
             return self._with_fault(fault, bytes([ap_ascii.ACK]))
@@ -135,7 +142,7 @@ class ApAsciiSimServer:
             return b''
         if not fragment.lrc_ok:
             return self._count(bytes([ap_ascii.NAK]))
-        fault = self.faults.draw(unit)
+        fault, self._message_fault = self._message_fault, None
         if fault in ('nak', 'bel'):  # the fragment is not acted on
             return self._with_fault(fault, b'')
         return self._with_fault(fault, self._execute(self.devices[unit], fragment.code))

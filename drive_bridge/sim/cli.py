@@ -11,8 +11,11 @@ Examples::
 
 With ``--console`` (default when standard input is a terminal) it reads commands:
 ``trip ADDR CODE`` (MCD trip code; FC: alarm word bit, 5 = over current), ``hand ADDR
-on|off`` (MCD Hand On; FC local operation), ``silent ADDR on|off``, ``fault ADDR
-nak|bel|silence|garbage`` (AP ASCII: the next reply), ``status``, ``quit``.
+on|off`` (MCD Hand On; FC local operation), ``silent ADDR on|off``, ``fault ADDR KIND
+[COUNT]`` (the next replies; Modbus: crc, no_reply, slow, exception, garbage, truncated,
+wrong_address; AP ASCII: nak, bel, silence, garbage, slow), ``status``, ``quit``.
+``--faults RATE[:KIND,...]`` with ``--fault-seed N`` injects random faults into that share of
+all replies, reproducibly.
 """
 
 import argparse
@@ -25,6 +28,7 @@ from typing import Dict, List, Optional
 from drive_bridge.devices import mcd
 from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
 from drive_bridge.sim.devices import make_device, SIM_MODELS
+from drive_bridge.sim.faults import parse_fault_plan
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
@@ -88,6 +92,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help='start this device tripped: MCD trip code, FC alarm word bit')
     parser.add_argument('--console', action='store_true', default=None,
                         help='read commands from standard input')
+    parser.add_argument('--faults', default='', metavar='RATE[:KIND,...]',
+                        help='inject random faults into this share of replies, e.g. 0.1 or '
+                             '0.05:crc,no_reply (kinds: see drive_bridge.sim.faults)')
+    parser.add_argument('--fault-seed', type=int, default=1, help='seed of --faults')
+    parser.add_argument('--fault-slow', type=float, default=0.1,
+                        help="delay of a 'slow' reply, seconds (keep it under the timeout)")
     return parser
 
 
@@ -96,8 +106,15 @@ def build_server(args: argparse.Namespace):
     if args.lvsg:
         if args.device:
             raise SystemExit('drive_bridge_sim: --lvsg (a gateway) and --device do not mix')
-        return make_lvsg_gateway(dict(args.lvsg), start_time_s=args.start_time,
-                                 stop_time_s=args.stop_time, motor_flc_a=args.flc)
+        gateway = make_lvsg_gateway(dict(args.lvsg), start_time_s=args.start_time,
+                                    stop_time_s=args.stop_time, motor_flc_a=args.flc)
+        if args.faults:
+            try:
+                gateway.faults.set_plan(parse_fault_plan(args.faults, gateway.faults.allowed,
+                                                         args.fault_seed, args.fault_slow))
+            except ValueError as error:
+                raise SystemExit(f'drive_bridge_sim: --faults: {error}') from None
+        return gateway
     if not args.device:
         raise SystemExit('drive_bridge_sim: give at least one --device or --lvsg')
     now = time.monotonic()
@@ -121,10 +138,18 @@ def build_server(args: argparse.Namespace):
         if any(SIM_MODELS[model][0] != 'mcd' for model, _ in args.device) or args.tcp \
                 is not None:
             raise SystemExit('drive_bridge_sim: AP ASCII serves MCD models on a pty only')
-        return ApAsciiSimServer({unit: device.model for unit, device in devices.items()})
-    wire = WireTiming(args.wire_baud, args.wire_parity,
-                      1 if args.wire_parity != 'N' else 2) if args.wire_baud else None
-    return ModbusSimServer(devices, wire=wire)
+        server = ApAsciiSimServer({unit: device.model for unit, device in devices.items()})
+    else:
+        wire = WireTiming(args.wire_baud, args.wire_parity,
+                          1 if args.wire_parity != 'N' else 2) if args.wire_baud else None
+        server = ModbusSimServer(devices, wire=wire)
+    if args.faults:
+        try:
+            server.faults.set_plan(parse_fault_plan(args.faults, server.faults.allowed,
+                                                    args.fault_seed, args.fault_slow))
+        except ValueError as error:
+            raise SystemExit(f'drive_bridge_sim: --faults: {error}') from None
+    return server
 
 
 def _set_hand(device, on: bool) -> None:
@@ -152,7 +177,7 @@ def run_console_command(server: ModbusSimServer, line: str) -> str:
         return _console(server, words)
     except (ValueError, IndexError, KeyError) as error:
         return f'error: {error}; commands: trip ADDR CODE, hand ADDR on|off, ' \
-               'silent ADDR on|off, fault ADDR nak|bel|silence|garbage, status, quit'
+               'silent ADDR on|off, fault ADDR KIND [COUNT], status, quit'
 
 
 def _console(server: ModbusSimServer, words: List[str]) -> str:
@@ -172,8 +197,8 @@ def _console(server: ModbusSimServer, words: List[str]) -> str:
             _set_hand(device, words[2] == 'on')
         elif command == 'silent':
             (server.silent_units.add if words[2] == 'on' else server.silent_units.discard)(unit)
-        elif command == 'fault' and isinstance(server, ApAsciiSimServer):
-            server.inject(unit, words[2])
+        elif command == 'fault':
+            server.faults.inject(unit, words[2], int(words[3]) if len(words) > 3 else 1)
         else:
             raise ValueError(f'unknown command {command!r}')
         return _describe(unit, device, now)

@@ -91,6 +91,7 @@ class FaultInjector:
         self.allowed = allowed
         self.plan = FaultPlan(kinds=allowed)
         self.injected: Counter = Counter()  # (unit, kind) -> count
+        self.last_queued = False  # whether the last draw came from inject() (not at random)
         self._queued: Dict[int, Deque[str]] = defaultdict(deque)
         self._lock = threading.Lock()
         self._random = random.Random(1)
@@ -120,6 +121,7 @@ class FaultInjector:
         """
         with self._lock:
             queue = self._queued.get(unit)
+            self.last_queued = bool(queue)
             if queue:
                 kind = queue.popleft()
             else:
