@@ -8,7 +8,7 @@ PACKAGE = 'drive_bridge'
 
 setup(
     name=PACKAGE,
-    version='0.2.0',
+    version='0.3.0',
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
