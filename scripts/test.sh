@@ -17,7 +17,7 @@ trap 'rm -rf "$workspace"' EXIT
 mkdir -p "$workspace/src/drive_bridge"
 git -C "$root" ls-files -z --cached --others --exclude-standard \
   | (cd "$root" && xargs -0 cp --parents -t "$workspace/src/drive_bridge")
-(cd "$workspace" && "$VENV/bin/colcon" --log-base log build \
+(cd "$workspace" && "$VENV/bin/colcon" --log-base log build --event-handlers console_direct- \
   && "$VENV/bin/colcon" --log-base log test --return-code-on-test-failure \
        --event-handlers console_direct- \
        --pytest-args test/unit test/test_flake8.py test/test_pep257.py \
