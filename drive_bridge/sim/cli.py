@@ -106,15 +106,9 @@ def build_server(args: argparse.Namespace):
     if args.lvsg:
         if args.device:
             raise SystemExit('drive_bridge_sim: --lvsg (a gateway) and --device do not mix')
-        gateway = make_lvsg_gateway(dict(args.lvsg), start_time_s=args.start_time,
-                                    stop_time_s=args.stop_time, motor_flc_a=args.flc)
-        if args.faults:
-            try:
-                gateway.faults.set_plan(parse_fault_plan(args.faults, gateway.faults.allowed,
-                                                         args.fault_seed, args.fault_slow))
-            except ValueError as error:
-                raise SystemExit(f'drive_bridge_sim: --faults: {error}') from None
-        return gateway
+        return _with_faults(make_lvsg_gateway(dict(args.lvsg), start_time_s=args.start_time,
+                                              stop_time_s=args.stop_time,
+                                              motor_flc_a=args.flc), args)
     if not args.device:
         raise SystemExit('drive_bridge_sim: give at least one --device or --lvsg')
     now = time.monotonic()
@@ -143,6 +137,11 @@ def build_server(args: argparse.Namespace):
         wire = WireTiming(args.wire_baud, args.wire_parity,
                           1 if args.wire_parity != 'N' else 2) if args.wire_baud else None
         server = ModbusSimServer(devices, wire=wire)
+    return _with_faults(server, args)
+
+
+def _with_faults(server, args: argparse.Namespace):
+    """Give the server the random fault plan of ``--faults``, if any; return it."""
     if args.faults:
         try:
             server.faults.set_plan(parse_fault_plan(args.faults, server.faults.allowed,

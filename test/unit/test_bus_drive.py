@@ -181,13 +181,19 @@ class LosesOneReply(FakeDrive):
         return result
 
 
-@pytest.mark.parametrize('failure', [NoResponse('no reply'), DeviceException(6)])
-def test_a_failed_stop_is_kept_by_the_keepalive_never_the_old_run_word(failure):
+def bus_losing_one_reply():
+    """Return (bus, drive, clock) with a drive whose next write's reply can be lost."""
     clock = FakeClock()
     drive = LosesOneReply(clock)
     spec = DeviceSpec('conv', 1, DriveProfile(fc.DATA, 'fc51'), poll_rate_hz=10.0)
     bus = BusMaster(drive, [spec], BusTiming(retries=0), clock=clock, sleep=clock.sleep)
     run_for(bus, clock, 0.5)
+    return bus, drive, clock
+
+
+@pytest.mark.parametrize('failure', [NoResponse('no reply'), DeviceException(6)])
+def test_a_failed_stop_is_kept_by_the_keepalive_never_the_old_run_word(failure):
+    bus, drive, clock = bus_losing_one_reply()
     bus.submit_command('conv', 'start')
     run_for(bus, clock, 0.5)
     drive.fail_next_write_with = failure
@@ -201,11 +207,7 @@ def test_a_failed_stop_is_kept_by_the_keepalive_never_the_old_run_word(failure):
 
 
 def test_a_failed_start_is_not_repeated_the_keepalive_keeps_the_stop():
-    clock = FakeClock()
-    drive = LosesOneReply(clock)
-    spec = DeviceSpec('conv', 1, DriveProfile(fc.DATA, 'fc51'), poll_rate_hz=10.0)
-    bus = BusMaster(drive, [spec], BusTiming(retries=0), clock=clock, sleep=clock.sleep)
-    run_for(bus, clock, 0.5)
+    bus, drive, clock = bus_losing_one_reply()
     bus.submit_command('conv', 'stop')
     run_for(bus, clock, 0.5)
     drive.fail_next_write_with = NoResponse('no reply')
