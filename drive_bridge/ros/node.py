@@ -14,7 +14,7 @@ and wait for its outcome on a future, in their own callback group.
 
 import queue
 import sys
-from typing import Any, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from drive_bridge import config as cfg
@@ -107,7 +107,7 @@ class DriveBridgeNode(LifecycleNode):
         self.active = False
         self._events: 'queue.SimpleQueue[BusEvent]' = queue.SimpleQueue()
         self._device_publishers: Dict[str, _DevicePublishers] = {}
-        self._entities: List[Any] = []
+        self._entities: List[Tuple[Callable[[Any], bool], Any]] = []  # (destroy, entity)
         self._service_group = ReentrantCallbackGroup()
         self._timer_group = MutuallyExclusiveCallbackGroup()
         self._guard = self.create_guard_condition(self._publish_events)
@@ -155,9 +155,9 @@ class DriveBridgeNode(LifecycleNode):
                              listener=self._on_bus_event)
         for device in self.config.devices:
             self._create_device_interface(device.name, device.is_drive)
-        self._entities.append(self.create_timer(
+        self._entities.append((self.destroy_timer, self.create_timer(
             self.config.diagnostics_period_s, self._publish_diagnostics,
-            callback_group=self._timer_group))
+            callback_group=self._timer_group)))
         self.bus.start()
         self.get_logger().info(
             f'bus {self.config.link.describe()}: '
@@ -206,21 +206,13 @@ class DriveBridgeNode(LifecycleNode):
             self._report_stops(self.bus.shutdown(stop_motors=stop_motors,
                                                  timeout_s=SHUTDOWN_STOP_TIMEOUT_S), 'shutdown')
             self.bus = None
-        for entity in self._entities:
-            self._destroy(entity)
+        for destroy, entity in self._entities:
+            destroy(entity)
         for publishers in self._device_publishers.values():
             for publisher in publishers.all:
                 self.destroy_lifecycle_publisher(publisher)
         self._entities.clear()
         self._device_publishers.clear()
-
-    def _destroy(self, entity: Any) -> None:
-        for destroy in (self.destroy_timer, self.destroy_service, self.destroy_subscription):
-            try:
-                if destroy(entity):
-                    return
-            except (TypeError, AttributeError):
-                continue
 
     @staticmethod
     def _report_stops(outcomes: List[str], when: str) -> None:
@@ -303,15 +295,15 @@ class DriveBridgeNode(LifecycleNode):
         publishers.publish_state('unknown')
         self._device_publishers[name] = publishers
         if is_drive:
-            self._entities.append(self.create_subscription(
+            self._entities.append((self.destroy_subscription, self.create_subscription(
                 Float32, f'{name}/speed_reference',
                 lambda message, n=name: self._on_speed_reference(n, message), 10,
-                callback_group=self._timer_group))
+                callback_group=self._timer_group)))
         for command in DRIVE_SERVICE_COMMANDS if is_drive else SERVICE_COMMANDS:
-            self._entities.append(self.create_service(
+            self._entities.append((self.destroy_service, self.create_service(
                 Trigger, f'{name}/{command}',
                 lambda request, response, c=command, n=name: self._on_trigger(n, c, response),
-                callback_group=self._service_group))
+                callback_group=self._service_group)))
 
     def _inactive_reason(self) -> str:
         """Return why commands are refused now, or '' when the node is active."""
