@@ -1,12 +1,13 @@
 """Run the node in a subprocess and drive it through real rclpy clients."""
 
+from contextlib import contextmanager
 import os
 import signal
 import subprocess
 import sys
 import tempfile
 import time
-from typing import Dict, List
+from typing import Dict, Iterator, List, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from drive_bridge.config import write_params_file
@@ -55,6 +56,33 @@ def stop_node(process: subprocess.Popen, timeout_s: float = 10.0):
         process.kill()
         process.wait()
     return process.returncode, node_output(process)
+
+
+@contextmanager
+def serving(server) -> Iterator[object]:
+    """Serve a simulator on a pty for the duration of the block."""
+    server.open_pty()
+    server.start()
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+@contextmanager
+def running_node(params_path, bus: Dict, devices: Dict[str, Dict], drives: Sequence[str] = (),
+                 ready: Sequence[str] = ()) -> Iterator['RosClient']:
+    """Run the node on ``bus`` with ``devices``; yield a client once ``ready`` are ready."""
+    process = start_node(write_params(params_path, bus, devices))
+    client = RosClient(list(devices), drives=list(drives))
+    try:
+        for name in ready:
+            assert client.wait_state(name, 'ready', 15.0), stop_node(process)
+        client.process = process
+        yield client
+    finally:
+        client.close()
+        print(stop_node(process)[1])
 
 
 class RosClient:

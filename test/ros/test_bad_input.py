@@ -11,7 +11,7 @@ import math
 from diagnostic_msgs.msg import DiagnosticStatus
 from drive_bridge.sim.devices import make_sim_server
 import pytest
-from ros_helpers import RosClient, start_node, stop_node, write_params
+from ros_helpers import running_node, serving, start_node, stop_node
 
 DEVICES = {
     'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 20.0,
@@ -24,28 +24,21 @@ REFERENCE_40_PCT = 0x1999
 
 @pytest.fixture(scope='module')
 def sim():
-    server = make_sim_server({1: 'fc51', 20: 'mcd500'})
-    server.open_pty()
-    server.start()
-    yield server
-    server.stop()
+    with serving(make_sim_server({1: 'fc51', 20: 'mcd500'})) as server:
+        yield server
 
 
 @pytest.fixture(scope='module')
 def node(sim, tmp_path_factory):
-    params = write_params(tmp_path_factory.mktemp('params') / 'bad_input.yaml',
-                          {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.1,
-                           'diagnostics_period': 0.2}, DEVICES)
-    process = start_node(params)
-    client = RosClient(list(DEVICES), drives=['conv'])
-    assert client.wait_state('conv', 'ready', 15.0), stop_node(process)
-    assert client.wait_state('gone', 'offline', 15.0)
-    assert client.call('conv', 'start').success
-    assert client.wait_state('conv', 'running')
-    yield client
-    client.call('conv', 'coast_stop')
-    client.close()
-    print(stop_node(process)[1])
+    with running_node(tmp_path_factory.mktemp('params') / 'bad_input.yaml',
+                      {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.1,
+                       'diagnostics_period': 0.2}, DEVICES, drives=['conv'],
+                      ready=['conv']) as client:
+        assert client.wait_state('gone', 'offline', 15.0)
+        assert client.call('conv', 'start').success
+        assert client.wait_state('conv', 'running')
+        yield client
+        client.call('conv', 'coast_stop')
 
 
 def what_devices_hold(sim):

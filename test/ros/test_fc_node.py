@@ -5,7 +5,7 @@ import math
 from diagnostic_msgs.msg import DiagnosticStatus
 from drive_bridge.sim.devices import make_sim_server
 import pytest
-from ros_helpers import RosClient, start_node, stop_node, write_params
+from ros_helpers import running_node, serving
 
 DEVICES = {
     'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 20.0,
@@ -16,27 +16,19 @@ DEVICES = {
 
 @pytest.fixture(scope='module')
 def sim():
-    server = make_sim_server({1: 'fc51', 20: 'mcd500'},
-                             settings={'fc': {'ramp_up_s': 1.0, 'ramp_down_s': 1.0,
-                                              'quick_stop_ramp_s': 0.3}})
-    server.open_pty()
-    server.start()
-    yield server
-    server.stop()
+    with serving(make_sim_server({1: 'fc51', 20: 'mcd500'},
+                                 settings={'fc': {'ramp_up_s': 1.0, 'ramp_down_s': 1.0,
+                                                  'quick_stop_ramp_s': 0.3}})) as server:
+        yield server
 
 
 @pytest.fixture(scope='module')
 def node(sim, tmp_path_factory):
-    params = write_params(tmp_path_factory.mktemp('params') / 'fc.yaml',
-                          {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2,
-                           'backoff_max': 2.0, 'diagnostics_period': 0.5}, DEVICES)
-    process = start_node(params)
-    client = RosClient(list(DEVICES), drives=['conv'])
-    assert client.wait_state('conv', 'ready', 15.0), stop_node(process)
-    yield client
-    client.close()
-    code, output = stop_node(process)
-    print(output)
+    with running_node(tmp_path_factory.mktemp('params') / 'fc.yaml',
+                      {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2,
+                       'backoff_max': 2.0, 'diagnostics_period': 0.5}, DEVICES,
+                      drives=['conv'], ready=['conv']) as client:
+        yield client
 
 
 @pytest.fixture

@@ -6,7 +6,8 @@ import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 import rclpy
-from ros_helpers import node_output, RosClient, start_node, stop_node, write_params
+from ros_helpers import (
+    node_output, RosClient, running_node, serving, start_node, stop_node, write_params)
 
 DEVICES = {
     'main': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 10.0},
@@ -18,25 +19,18 @@ DEVICES = {
 
 @pytest.fixture(scope='module')
 def sim():
-    server = make_mcd_server({20: 'mcd500', 21: 'mcd202'}, start_time_s=1.0, stop_time_s=1.0)
-    server.open_pty()
-    server.start()
-    yield server
-    server.stop()
+    with serving(make_mcd_server({20: 'mcd500', 21: 'mcd202'}, start_time_s=1.0,
+                                 stop_time_s=1.0)) as server:
+        yield server
 
 
 @pytest.fixture(scope='module')
 def node(sim, tmp_path_factory):
-    params = write_params(tmp_path_factory.mktemp('params') / 'bus.yaml',
-                          {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2,
-                           'backoff_max': 2.0, 'diagnostics_period': 0.5}, DEVICES)
-    process = start_node(params)
-    client = RosClient(list(DEVICES))
-    assert client.wait_state('main', 'ready', 15.0), stop_node(process)
-    yield client
-    client.close()
-    code, output = stop_node(process)
-    print(output)
+    with running_node(tmp_path_factory.mktemp('params') / 'bus.yaml',
+                      {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2,
+                       'backoff_max': 2.0, 'diagnostics_period': 0.5}, DEVICES,
+                      ready=['main']) as client:
+        yield client
 
 
 def test_start_running_then_stop_ready(node, sim):

@@ -4,7 +4,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.tools.plot_recording import decoded_messages, main as plot_main, read_recording
 import pytest
-from ros_helpers import LATCHED, RosClient, start_node, stop_node, write_params
+from ros_helpers import LATCHED, running_node, serving
 from std_msgs.msg import Float32, String
 
 # pip's mcap and mcap-ros2-support have no rosdep keys: an apt workspace may lack them.
@@ -23,21 +23,15 @@ TOPICS = {'/main/state': String, '/main/motor_current': Float32, '/conv/state': 
 
 @pytest.fixture(scope='module')
 def node(tmp_path_factory):
-    server = make_sim_server({20: 'mcd500', 1: 'fc51'},
-                             settings={'mcd': {'start_time_s': 1.0, 'stop_time_s': 0.5},
-                                       'fc': {'ramp_up_s': 1.0, 'ramp_down_s': 1.0}})
-    server.open_pty()
-    server.start()
-    params = write_params(tmp_path_factory.mktemp('params') / 'record.yaml',
-                          {'port': server.pty_path, 'parity': 'N', 'timeout': 0.1,
-                           'diagnostics_period': 0.5}, DEVICES)
-    process = start_node(params)
-    client = RosClient(list(DEVICES), drives=['conv'])
-    assert client.wait_state('main', 'ready', 15.0), stop_node(process)
-    yield client
-    client.close()
-    stop_node(process)
-    server.stop()
+    simulator = make_sim_server({20: 'mcd500', 1: 'fc51'},
+                                settings={'mcd': {'start_time_s': 1.0, 'stop_time_s': 0.5},
+                                          'fc': {'ramp_up_s': 1.0, 'ramp_down_s': 1.0}})
+    with serving(simulator) as server, running_node(
+            tmp_path_factory.mktemp('params') / 'record.yaml',
+            {'port': server.pty_path, 'parity': 'N', 'timeout': 0.1,
+             'diagnostics_period': 0.5}, DEVICES, drives=['conv'],
+            ready=['main']) as client:
+        yield client
 
 
 def test_record_read_back_and_plot(node, tmp_path):
