@@ -103,10 +103,8 @@ class LvsgProfile:
 
     def request_write(self) -> WriteRegister:
         """Return the write of the register holding the parameter request (output byte 2)."""
-        registers = bytes_to_registers(
-            replace(self.control or Control(), parameter_request=self.request).encode(True),
-            self.byte_order)
-        return WriteRegister(self.output_register + 1, registers[1])
+        image = self.image_write(self.control or Control())  # extended: two registers
+        return WriteRegister(self.output_register + 1, image.values[1])
 
     def image_write(self, control: Control):
         """Return the write of the whole output image carrying ``control``."""

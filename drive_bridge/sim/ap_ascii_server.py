@@ -21,7 +21,6 @@ from drive_bridge.sim.faults import AP_ASCII_FAULTS, FaultInjector, FaultPlan
 from drive_bridge.sim.mcd_model import McdModel, ModuleError
 from drive_bridge.sim.pty_link import PtyLink
 
-FAULTS = AP_ASCII_FAULTS
 _COMMAND_VALUES = {'B10': 1, 'B12': 2, 'B14': 3, 'B16': 4, 'B18': 5}
 STALE_PARTIAL_S = 0.1  # a partial fragment older than this is dropped
 

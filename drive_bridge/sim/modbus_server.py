@@ -203,11 +203,13 @@ class ModbusSimServer:
                 self._close_key(key)
         self._listeners.clear()
 
-    def _forget(self, fileobj) -> None:
+    def _forget(self, fileobj) -> bool:
+        """Stop watching ``fileobj``; return False if it was not watched."""
         try:
             self._selector.unregister(fileobj)
         except (KeyError, ValueError):
-            pass
+            return False
+        return True
 
     # -- thread -------------------------------------------------------------------------
     def start(self) -> 'ModbusSimServer':
@@ -230,9 +232,7 @@ class ModbusSimServer:
         os.close(self._wake_w)
 
     def _close_key(self, key) -> None:
-        try:
-            self._selector.unregister(key.fileobj)
-        except (KeyError, ValueError):
+        if not self._forget(key.fileobj):
             return
         if isinstance(key.fileobj, socket.socket):
             key.fileobj.close()
