@@ -14,14 +14,14 @@ import sys
 import time
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
-from drive_bridge.devices.base import ReadRegisters
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.protocol import rtu
+from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.sim.mcd_device import make_mcd_server
 from drive_bridge.sim.modbus_server import WireTiming
-from drive_bridge.transport.factory import make_transport
 from drive_bridge.transport.modbus import (
     LinkSettings, ModbusTransport, PYMODBUS_VERSION, wire_time_s)
+from drive_bridge.transport.protocols import make_transport
 
 UNITS = (20, 21, 22)
 REQUEST_BYTES = 8
@@ -51,7 +51,8 @@ def bench_bus(baudrate: int, seconds: float, engine: str) -> tuple:
     gap_s = rtu.frame_gap_s(baudrate, 'E', 1)
     specs = [DeviceSpec(f'd{unit}', unit, McdProfile('mcd500'), poll_rate_hz=100.0)
              for unit in UNITS]
-    bus = BusMaster(make_transport(settings, engine), specs, BusTiming(frame_gap_s=gap_s))
+    bus = BusMaster(make_transport(settings, {'serial_engine': engine}), specs,
+                    BusTiming(frame_gap_s=gap_s))
     bus.run_once()  # connect
     for _ in range(6):  # warm up
         bus.run_once()

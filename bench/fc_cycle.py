@@ -14,14 +14,14 @@ import time
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices import fc
-from drive_bridge.devices.base import (
-    PollItem, ReadCoils, ReadRegisters, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.protocol import rtu
+from drive_bridge.protocol.requests import (
+    PollItem, ReadCoils, ReadRegisters, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.modbus_server import WireTiming
-from drive_bridge.transport.factory import make_transport
 from drive_bridge.transport.modbus import LinkSettings, PYMODBUS_VERSION, wire_time_s
+from drive_bridge.transport.protocols import make_transport
 
 
 def frame_bytes(transaction) -> tuple:
@@ -71,7 +71,7 @@ def bench(baudrate: int, seconds: float, engine: str) -> dict:
     wire_settings = LinkSettings(baudrate=baudrate, parity='E')
     profile = CountingProfile(wire_settings)
     readings = []
-    bus = BusMaster(make_transport(settings, engine),
+    bus = BusMaster(make_transport(settings, {'serial_engine': engine}),
                     [DeviceSpec('conv', 1, profile, poll_rate_hz=100.0)],
                     BusTiming(frame_gap_s=rtu.frame_gap_s(baudrate, 'E', 1)),
                     listener=lambda event: readings.append(event.kind == 'reading'))

@@ -1,63 +1,32 @@
 """
 Configuration: every bus and device setting as data, validated into typed objects.
 
-The ROS node declares its parameters from these tables (types, defaults, ranges, text) and
-the tools use the same validation, so a bad value gets the same one-line message anywhere.
+The common settings are here; each protocol (:mod:`drive_bridge.transport.protocols`) and
+each device family (:mod:`drive_bridge.devices.registry`) declares its own. The ROS node
+declares its parameters from these tables (types, defaults, ranges, text) and the tools use
+the same validation, so a bad value gets the same one-line message anywhere, naming the
+parameter and the allowed values.
 """
 
 from dataclasses import dataclass, field
-import math
 import re
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from drive_bridge.bus.master import BusTiming, DeviceSpec
+from drive_bridge.devices.contracts import Family
 from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.errors import ConfigError
-from drive_bridge.protocol import ap_ascii, rtu
-from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
+from drive_bridge.settings import check_value, Setting
 from drive_bridge.transport.link import LinkSettings
+from drive_bridge.transport.protocols import make_transport, protocol_settings, PROTOCOLS
 
-PROTOCOLS = ('modbus_rtu', 'ap_ascii', 'modbus_tcp', 'rtu_over_tcp')
-DRIVES = tuple(name for name, family in FAMILIES.items() if family.is_drive)
-LVSG = ('lvsg',)
 BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
 PARITIES = ('N', 'E', 'O')
-DEVICE_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
-
-
-@dataclass(frozen=True)
-class Setting:
-    """
-    One parameter: name, Python type, default (None = required), limits and meaning.
-
-    ``low``/``high`` bound numbers (``high_open``: high itself excluded); ``choices`` bound
-    strings and ints; ``runtime`` settings may be changed with ``ros2 param set``.
-    """
-
-    name: str
-    kind: type
-    default: Any
-    description: str
-    low: Optional[float] = None
-    high: Optional[float] = None
-    choices: Tuple = ()
-    runtime: bool = False
-    high_open: bool = False
-    families: Tuple[str, ...] = ()  # the families that take it; () = every family
-
-    def allowed(self) -> str:
-        """Return the allowed values in words."""
-        if self.choices:
-            return ', '.join(str(choice) for choice in self.choices)
-        if self.low is not None:
-            closing = ')' if self.high_open else ']'
-            return f'[{self.low:g}, {self.high:g}{closing}'
-        return {bool: 'true or false', str: 'a string', int: 'an integer',
-                float: 'a number', list: 'a list of names'}[self.kind]
-
+DEVICE_NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
+MAX_DEVICE_NAME = 64
 
 BUS_SETTINGS: Tuple[Setting, ...] = (
-    Setting('protocol', str, 'modbus_rtu', 'bus protocol', choices=PROTOCOLS),
+    Setting('protocol', str, 'modbus_rtu', 'bus protocol', choices=tuple(PROTOCOLS)),
     Setting('port', str, '/dev/ttyUSB0', 'serial device (serial protocols)'),
     Setting('host', str, '127.0.0.1', 'gateway host (TCP protocols)'),
     Setting('tcp_port', int, 502, 'gateway TCP port', low=1, high=65535),
@@ -70,7 +39,8 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
             low=0, high=10),
     Setting('devices', list, None, 'device names; each has a block <name>.*'),
     Setting('offline_after', int, 3,
-            'failed transactions in a row before a device is reported offline', low=1, high=100),
+            'failed transactions (or refused polls) in a row before a device is reported '
+            'offline (or unknown)', low=1, high=100),
     Setting('backoff_max', float, 10.0,
             'longest pause in seconds between probes of an offline device or link',
             low=0.5, high=600.0),
@@ -80,69 +50,59 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
     Setting('local_echo', bool, False, 'the RS-485 adapter echoes what it sends'),
     Setting('diagnostics_period', float, 1.0, 'seconds between /diagnostics messages',
             low=0.1, high=60.0),
-    Setting('ap_nak_retries', int, 2,
-            'AP ASCII: how often an exchange answered with NAK (bad LRC, not executed) is '
-            'restarted from the address', low=0, high=10),
-    Setting('ap_address_lrc_eot', bool, True,
-            'AP ASCII: the address fragment LRC includes EOT (the manual leaves it open)'),
-    Setting('serial_engine', str, 'native',
-            'Modbus RTU on a serial port: native (reads replies by their length) or pymodbus',
-            choices=SERIAL_ENGINES),
-)
+    Setting('command_deadline', float, 2.0,
+            'seconds a command may wait for the bus; one not on the wire by then is dropped, '
+            'answered as failed and never sent', low=0.1, high=30.0),
+) + protocol_settings()
 
-DEVICE_SETTINGS: Tuple[Setting, ...] = (
+COMMON_DEVICE_SETTINGS: Tuple[Setting, ...] = (
     Setting('family', str, None, 'device family', choices=tuple(FAMILIES)),
     Setting('model', str, 'auto', 'device model; auto reads it from the device'),
     Setting('address', int, None, 'bus address', low=1, high=247),
     Setting('poll_rate', float, 5.0, 'polls per second', low=0.1, high=100.0, runtime=True),
-    Setting('allow_control', bool, True, 'false: monitor only, commands refused',
-            runtime=True),
+    Setting('allow_control', bool, True,
+            'false: monitor only, nothing at all is written to the device', runtime=True),
     Setting('stop_on_shutdown', bool, True,
-            'a clean shutdown stops the motors this node started', runtime=True),
+            'shutdown and deactivate stop the motors that may run because of this node',
+            runtime=True),
     Setting('current_scale', float, 1.0,
             'factor on the reported current (MCD5-0068B and smaller: 0.1)',
             low=0.001, high=1000.0),
+)
+# Families that take a speed reference (drives) take these too.
+REFERENCE_SETTINGS: Tuple[Setting, ...] = (
     Setting('speed_reference', float, 0.0, 'drives: percent, FC scaling',
-            low=-200.0, high=200.0, high_open=True, runtime=True, families=DRIVES),
+            low=-200.0, high=200.0, high_open=True, runtime=True),
     Setting('reference_timeout', float, 0.0,
             'drives: seconds without a speed_reference message before a ramp stop; 0 = off',
-            low=0.0, high=3600.0, runtime=True, families=DRIVES),
-    Setting('comms_timeout', float, 0.0,
-            "drives: the drive's own control word timeout in seconds, written when the drive "
-            'comes online (FC: par. 8-03); 0 = leave the drive as set',
-            low=0.0, high=6000.0, families=DRIVES),
-    Setting('comms_timeout_function', int, -1,
-            'drives: what the drive does on a control word timeout (FC: par. 8-04; 0 off, '
-            '1 freeze, 2 stop, 3 jog, 4 max speed, 5 stop and trip); -1 = leave as set',
-            choices=(-1, 0, 1, 2, 3, 4, 5), families=DRIVES),
-    Setting('drive_link_timeout', float, 0.0,
-            "VLT option card: register 3, the card's drive communications timeout in seconds, "
-            'written when the drive comes online; 0 = leave it', low=0.0, high=655.35,
-            families=DRIVES),
-    Setting('gateway_input_register', int, None,
-            "lvsg: frame address of the first register holding the slave's input bytes "
-            '(status) in the gateway', low=0, high=65535, families=LVSG),
-    Setting('gateway_output_register', int, None,
-            "lvsg: frame address of the first register holding the slave's output bytes "
-            '(control) in the gateway', low=0, high=65535, families=LVSG),
-    Setting('gateway_byte_order', str, 'big',
-            'lvsg: big = the first process byte is the high byte of a register',
-            choices=('big', 'little'), families=LVSG),
-    Setting('lvsg_module', str, 'extended',
-            'lvsg: the GSD module configured in the DP master: basic or extended',
-            choices=('basic', 'extended'), families=LVSG),
-    Setting('current_parameter', int, 0,
-            "drives: parameter number of the motor current readout; 0 = the model's own "
-            '(FC 51: 1614 = 16-14; VLT 5000: 520; VLT 6000: 514)',
-            low=0, high=6553, families=DRIVES),
+            low=0.0, high=3600.0, runtime=True),
 )
-BUS_SETTING = {setting.name: setting for setting in BUS_SETTINGS}
-DEVICE_SETTING = {setting.name: setting for setting in DEVICE_SETTINGS}
+
+
+def device_settings(family: Family) -> Tuple[Setting, ...]:
+    """Return every setting a device of ``family`` takes."""
+    return COMMON_DEVICE_SETTINGS + (REFERENCE_SETTINGS if family.reference else ()) + \
+        tuple(family.settings)
+
+
+def all_device_settings() -> Dict[str, Setting]:
+    """Return every device setting of any family, by name."""
+    settings = {setting.name: setting for setting in COMMON_DEVICE_SETTINGS + REFERENCE_SETTINGS}
+    for family in FAMILIES.values():
+        for setting in family.settings:
+            settings.setdefault(setting.name, setting)
+    return settings
+
+
+def families_taking(name: str) -> List[str]:
+    """Return the families that take device setting ``name``."""
+    return [family.name for family in FAMILIES.values()
+            if any(setting.name == name for setting in device_settings(family))]
 
 
 @dataclass
 class DeviceConfig:
-    """One validated device block."""
+    """One validated device block: the common settings, and the family's by name."""
 
     name: str
     family: str
@@ -152,30 +112,31 @@ class DeviceConfig:
     allow_control: bool
     stop_on_shutdown: bool
     current_scale: float
-    speed_reference: float = 0.0
-    reference_timeout: float = 0.0
-    comms_timeout: float = 0.0
-    comms_timeout_function: int = -1
-    current_parameter: int = 0
-    drive_link_timeout: float = 0.0
-    gateway_input_register: int = 0
-    gateway_output_register: int = 0
-    gateway_byte_order: str = 'big'
-    lvsg_module: str = 'extended'
     protocol: str = 'modbus_rtu'
+    options: Dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def entry(self) -> Family:
+        """Return the device's family entry."""
+        return FAMILIES[self.family]
 
     @property
     def is_drive(self) -> bool:
         """Return whether the device takes a speed reference (FC-profile drives)."""
-        return FAMILIES[self.family].is_drive
+        return self.entry.reference
+
+    def option(self, name: str, default: Any = None) -> Any:
+        """Return a family or reference setting by name."""
+        return self.options.get(name, default)
 
     def make_spec(self) -> DeviceSpec:
-        """Return the bus's view of this device, with its profile."""
-        profile = FAMILIES[self.family].make_profile(self)
-        if self.is_drive:
-            profile.set_reference(self.speed_reference)
+        """Return the bus's view of this device, with a new profile."""
+        options = dict(self.options, current_scale=self.current_scale)
+        profile = self.entry.make_profile(self.model, self.protocol, options)
         return DeviceSpec(self.name, self.address, profile, self.poll_rate,
-                          self.allow_control, self.stop_on_shutdown, self.reference_timeout)
+                          self.allow_control, self.stop_on_shutdown,
+                          self.option('reference_timeout', 0.0),
+                          self.option('speed_reference', 0.0))
 
 
 @dataclass
@@ -186,122 +147,117 @@ class BridgeConfig:
     timing: BusTiming
     devices: List[DeviceConfig] = field(default_factory=list)
     diagnostics_period_s: float = 1.0
-    serial_engine: str = 'native'
-    ap_nak_retries: int = 2
-    ap_address_lrc_eot: bool = True
+    protocol_options: Dict[str, Any] = field(default_factory=dict)
 
     def make_transport(self):
         """Return the transport of this bus."""
-        return make_transport(self.link, self.serial_engine, self.ap_nak_retries,
-                              self.ap_address_lrc_eot)
+        return make_transport(self.link, self.protocol_options)
+
+    def device(self, name: str) -> DeviceConfig:
+        """Return the device called ``name``; raise ConfigError naming the ones there are."""
+        for device in self.devices:
+            if device.name == name:
+                return device
+        raise ConfigError(f'no device {name!r} on this bus: it has '
+                          f'{", ".join(d.name for d in self.devices)}')
 
 
-def check_value(setting: Setting, value: Any, label: str) -> Any:
-    """Return ``value`` checked against ``setting`` (ints accepted for floats), or raise."""
-    if value is None:
-        raise ConfigError(f'parameter {label!r} is required: allowed {setting.allowed()}')
-    value = _coerce(setting, value, label)
-    if setting.choices and value not in setting.choices:
-        raise ConfigError(f'parameter {label!r} = {value!r} is invalid: allowed '
-                          f'{setting.allowed()}')
-    if setting.low is not None and not _in_range(setting, value):
-        raise ConfigError(f'parameter {label!r} = {value!r} is out of range: allowed '
-                          f'{setting.allowed()}')
-    return value
-
-
-def _coerce(setting: Setting, value: Any, label: str) -> Any:
-    if setting.kind is float and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    if setting.kind is list:
-        ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
-    else:
-        ok = isinstance(value, setting.kind) and not (
-            setting.kind is not bool and isinstance(value, bool))
-    if not ok:
-        hint = ''
-        if setting.name == 'parity' and isinstance(value, bool):
-            hint = ' (write parity: "N" with quotes: unquoted N is YAML false)'
-        raise ConfigError(f'parameter {label!r} = {value!r} has the wrong type: allowed '
-                          f'{setting.allowed()}{hint}')
-    if setting.kind is float and (math.isnan(value) or math.isinf(value)):
-        raise ConfigError(f'parameter {label!r} = {value!r} must be a finite number')
-    return list(value) if setting.kind is list else value
-
-
-def _in_range(setting: Setting, value: float) -> bool:
-    if setting.high_open:
-        return setting.low <= value < setting.high
-    return setting.low <= value <= setting.high
-
-
-def build_config(bus_values: Dict[str, Any], device_values: Dict[str, Dict[str, Any]]) \
-        -> BridgeConfig:
+def build_config(bus_values: Mapping[str, Any],
+                 device_values: Mapping[str, Mapping[str, Any]]) -> BridgeConfig:
     """Validate raw values (name -> value; devices: name -> {setting -> value})."""
+    check_bus_keys(bus_values)
     bus = {setting.name: check_value(setting, bus_values.get(setting.name, setting.default),
                                      setting.name)
            for setting in BUS_SETTINGS}
-    if bus['protocol'] == 'ap_ascii':
-        _check_ap_ascii(bus)
-    names = bus['devices']
-    if not names:
-        raise ConfigError("parameter 'devices' is empty: list at least one device name")
+    spec = PROTOCOLS[bus['protocol']]
+    _check_framing(bus, spec)
+    names = check_device_names(bus['devices'])
     devices = [build_device(name, device_values.get(name, {}), bus['protocol'])
-               for name in _checked_names(names)]
+               for name in names]
     _check_unique_addresses(devices)
     link = LinkSettings(
         protocol=bus['protocol'], port=bus['port'], host=bus['host'],
         tcp_port=bus['tcp_port'], baudrate=bus['baudrate'], parity=bus['parity'],
         stopbits=bus['stopbits'], timeout_s=bus['timeout'], local_echo=bus['local_echo'])
-    gap = bus['frame_gap']
-    if gap == 0.0 and link.is_serial:
-        gap = rtu.frame_gap_s(link.baudrate, link.parity, link.effective_stopbits)
+    gap = bus['frame_gap'] or link.frame_gap_s
     timing = BusTiming(retries=bus['retries'], offline_after=bus['offline_after'],
                        backoff_initial_s=min(1.0, bus['backoff_max']),
                        backoff_max_s=bus['backoff_max'], frame_gap_s=gap,
+                       command_deadline_s=bus['command_deadline'],
+                       transaction_timeout_s=bus['timeout'],
                        slow_reply_s=bus['timeout'] / 2)
-    return BridgeConfig(link, timing, devices, bus['diagnostics_period'], bus['serial_engine'],
-                        bus['ap_nak_retries'], bus['ap_address_lrc_eot'])
+    options = {setting.name: bus[setting.name] for setting in spec.settings}
+    return BridgeConfig(link, timing, devices, bus['diagnostics_period'], options)
 
 
-def _check_ap_ascii(bus: Dict[str, Any]) -> None:
-    """AP ASCII runs 8N1 (manual 000 section 10) with a timeout the MCD 3000 can meet."""
-    if bus['parity'] != 'N' or bus['stopbits'] not in (0, 1):
-        raise ConfigError(f"parameter 'parity' = {bus['parity']!r}, 'stopbits' = "
-                          f"{bus['stopbits']} do not fit protocol 'ap_ascii': AP ASCII is "
-                          '8N1, set parity: "N" and stopbits: 0 or 1')
-    if bus['timeout'] < ap_ascii.MIN_TIMEOUT_S:
-        raise ConfigError(f"parameter 'timeout' = {bus['timeout']} is too short for "
-                          f"protocol 'ap_ascii': allowed [{ap_ascii.MIN_TIMEOUT_S}, 10] (an MCD "
-                          '3000 may take 250 ms to answer)')
+def check_bus_keys(bus_values: Mapping[str, Any]) -> None:
+    """Refuse a protocol's own setting given (other than its default) for another protocol."""
+    protocol = bus_values.get('protocol', 'modbus_rtu')
+    if protocol not in PROTOCOLS:
+        return  # check_value names the allowed protocols
+    own = {setting.name for setting in PROTOCOLS[protocol].settings}
+    for name, spec in PROTOCOLS.items():
+        for setting in spec.settings:
+            if setting.name in bus_values and setting.name not in own and \
+                    bus_values[setting.name] != setting.default:
+                raise ConfigError(f'parameter {setting.name!r} applies to protocol {name} '
+                                  f'only, not {protocol}')
 
 
-def _checked_names(names: List[str]) -> List[str]:
+def _check_framing(bus: Dict[str, Any], spec) -> None:
+    """Check a protocol's fixed framing (AP ASCII: 8N1) and its minimum timeout."""
+    if spec.fixed_framing:
+        parity, stopbits = spec.fixed_framing
+        if bus['parity'] != parity or bus['stopbits'] not in (0, stopbits):
+            raise ConfigError(
+                f'parameter \'parity\' = {bus["parity"]!r}, \'stopbits\' = {bus["stopbits"]} '
+                f'do not fit protocol {spec.name!r}: it is 8{parity}{stopbits}, set parity: '
+                f'"{parity}" and stopbits: 0 or {stopbits}')
+    if bus['timeout'] < spec.min_timeout_s:
+        raise ConfigError(f'parameter \'timeout\' = {bus["timeout"]} is too short for '
+                          f'protocol {spec.name!r}: allowed [{spec.min_timeout_s}, 10]')
+
+
+def check_device_name(name: Any) -> str:
+    """Return ``name`` if it can name a device (it becomes a topic name), else raise."""
+    if not isinstance(name, str) or not DEVICE_NAME.fullmatch(name) or \
+            len(name) > MAX_DEVICE_NAME:
+        raise ConfigError(f"parameter 'devices': device name {name!r} is invalid: use a letter "
+                          f'followed by letters, digits or _, at most {MAX_DEVICE_NAME} '
+                          'characters (it becomes a topic name)')
+    return name
+
+
+def check_device_names(names: List[str]) -> List[str]:
+    """Return the device names if they are valid and unique, else raise ConfigError."""
+    if not names:
+        raise ConfigError("parameter 'devices' is empty: list at least one device name")
     seen = set()
     for name in names:
-        if not DEVICE_NAME.match(name):
-            raise ConfigError(f"parameter 'devices': name {name!r} is invalid: use a letter "
-                              'followed by letters, digits or _ (it becomes a topic name)')
+        check_device_name(name)
         if name in seen:
             raise ConfigError(f"parameter 'devices': name {name!r} is listed twice")
         seen.add(name)
     return names
 
 
-def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConfig:
+def build_device(name: str, values: Mapping[str, Any], protocol: str) -> DeviceConfig:
     """Validate one device block."""
-    family_name = values.get('family')
-    family = FAMILIES[check_value(DEVICE_SETTING['family'], family_name, f'{name}.family')]
-    checked = {}
-    for setting in device_settings(family.name):
-        checked[setting.name] = check_value(
-            setting, values.get(setting.name, setting.default), f'{name}.{setting.name}')
+    family = FAMILIES[check_value(COMMON_DEVICE_SETTINGS[0], values.get('family'),
+                                  f'{name}.family')]
+    settings = device_settings(family)
+    known = {setting.name for setting in settings}
     for key in values:
-        setting = DEVICE_SETTING.get(key)
-        if setting is not None and setting.families and family.name not in setting.families \
-                and values[key] != setting.default:
-            raise ConfigError(f'parameter {name + "." + key!r} applies to families '
-                              f'{", ".join(setting.families)} only, not {family.name}')
+        if key not in known:
+            owners = families_taking(key)
+            if owners:
+                raise ConfigError(f'parameter {name + "." + key!r} applies to families '
+                                  f'{", ".join(owners)} only, not {family.name}')
+            raise ConfigError(f'unknown parameter {name + "." + key!r}: a {family.name} device '
+                              f'takes {", ".join(sorted(known))}')
+    checked = {setting.name: check_value(setting, values.get(setting.name, setting.default),
+                                         f'{name}.{setting.name}')
+               for setting in settings}
     if checked['model'] not in family.models:
         hint = ' (this family cannot report its model: name it)' \
             if checked['model'] == 'auto' else ''
@@ -314,7 +270,17 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
     if protocol not in family.protocols:
         raise ConfigError(f'device {name!r} (family {family.name}) cannot run on protocol '
                           f'{protocol!r}: allowed {", ".join(family.protocols)}')
-    device = DeviceConfig(name=name, protocol=protocol, **checked)
+    if family.reference and not checked['allow_control'] and checked['speed_reference']:
+        raise ConfigError(f'parameter {name + ".speed_reference"!r} = '
+                          f'{checked["speed_reference"]} is refused: a monitor-only drive '
+                          '(allow_control false) takes no speed reference; set it to 0')
+    common = {setting.name for setting in COMMON_DEVICE_SETTINGS}
+    device = DeviceConfig(
+        name=name, family=family.name, model=checked['model'], address=checked['address'],
+        poll_rate=checked['poll_rate'], allow_control=checked['allow_control'],
+        stop_on_shutdown=checked['stop_on_shutdown'], current_scale=checked['current_scale'],
+        protocol=protocol,
+        options={key: value for key, value in checked.items() if key not in common})
     try:
         device.make_spec()  # the profile checks what the tables alone cannot
     except ConfigError as error:
@@ -322,19 +288,12 @@ def build_device(name: str, values: Dict[str, Any], protocol: str) -> DeviceConf
     return device
 
 
-def device_settings(family: str) -> Tuple[Setting, ...]:
-    """Return the settings a device of ``family`` takes (drives and lvsg have a few more)."""
-    return tuple(setting for setting in DEVICE_SETTINGS
-                 if not setting.families or family in setting.families)
-
-
 def _check_unique_addresses(devices: List[DeviceConfig]) -> None:
     """One device an address; LVSG slaves share their gateway's, one input area each."""
     by_key: Dict[tuple, str] = {}
     for device in devices:
-        lvsg_slave = device.family == 'lvsg'
-        key = (device.address, device.gateway_input_register) if lvsg_slave else \
-            (device.address,)
+        area = device.option('gateway_input_register')
+        key = (device.address, area) if area is not None else (device.address,)
         other = by_key.setdefault(key, device.name)
         if other != device.name:
             where = f' and gateway_input_register {key[1]}' if len(key) > 1 else ''
@@ -343,34 +302,123 @@ def _check_unique_addresses(devices: List[DeviceConfig]) -> None:
                               'unique')
 
 
-def check_params_files(argv: List[str]) -> None:
-    """
-    Raise ConfigError, in one line, for a ``--params-file`` that is missing or not YAML.
+# -- parameters files ----------------------------------------------------------------------
+def _duplicate_key_loader():
+    """Return a YAML loader that refuses a key given twice in one mapping, with its lines."""
+    import yaml
 
-    rcl would refuse it too, with a traceback and a parser location; this says which file
-    and why, before anything starts.
+    class UniqueKeyLoader(yaml.SafeLoader):
+        """Load YAML safely, refusing duplicate keys."""
+
+    def construct_mapping(loader, node, deep=False):
+        seen: Dict[Any, int] = {}
+        for key_node, _ in node.value:
+            key = loader.construct_object(key_node, deep=deep)
+            line = key_node.start_mark.line + 1
+            if key in seen:
+                raise ConfigError(f'key {key!r} is given twice (lines {seen[key]} and {line}): '
+                                  'the second would silently win; keep one')
+            seen[key] = line
+        return yaml.SafeLoader.construct_mapping(loader, node, deep)
+
+    UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+                                    construct_mapping)
+    return UniqueKeyLoader
+
+
+def load_params_file(path: str) -> Dict[str, Dict[str, Any]]:
     """
-    import yaml  # pyyaml: with every ROS install
-    for position, argument in enumerate(argv):
-        if argument != '--params-file' or position + 1 >= len(argv):
+    Return the node blocks of a ROS 2 parameters file: node key to ros__parameters.
+
+    Raises ConfigError in one line for a file that is missing, not YAML, has a key twice,
+    or is not a parameters file. Both forms are read: ``/**/drive_bridge:`` (or any node
+    key) holding ``ros__parameters``, and the nested form of the ROS 2 docs
+    (``line1:`` / ``drive_bridge:`` / ``ros__parameters:``), whose key is ``/line1/drive_bridge``.
+    """
+    import yaml
+    try:
+        with open(path) as stream:
+            content = yaml.load(stream, Loader=_duplicate_key_loader())
+    except OSError as error:
+        raise ConfigError(f'cannot read the parameters file {path}: {error.strerror}') from None
+    except ConfigError as error:
+        raise ConfigError(f'the parameters file {path}: {error}') from None
+    except yaml.YAMLError as error:
+        where = getattr(error, 'problem_mark', None)
+        line = f' at line {where.line + 1}' if where is not None else ''
+        raise ConfigError(f'the parameters file {path} is not valid YAML{line}: '
+                          f'{getattr(error, "problem", None) or error}') from None
+    blocks: Dict[str, Dict[str, Any]] = {}
+    if isinstance(content, dict):
+        _collect_blocks(content, [], blocks)
+    if not blocks:
+        raise ConfigError(f'the parameters file {path} must map a node name (such as '
+                          '/**/drive_bridge) to a ros__parameters block')
+    return blocks
+
+
+def _collect_blocks(mapping: Dict[Any, Any], path: List[str],
+                    blocks: Dict[str, Dict[str, Any]]) -> None:
+    for key, value in mapping.items():
+        if not isinstance(value, dict):
             continue
-        path = argv[position + 1]
-        try:
-            with open(path) as stream:
-                content = yaml.safe_load(stream)
-        except OSError as error:
-            raise ConfigError(f'cannot read the parameters file {path}: '
-                              f'{error.strerror}') from None
-        except yaml.YAMLError as error:
-            where = getattr(error, 'problem_mark', None)
-            line = f' at line {where.line + 1}' if where is not None else ''
-            raise ConfigError(f'the parameters file {path} is not valid YAML{line}: '
-                              f'{getattr(error, "problem", None) or error}') from None
-        if not isinstance(content, dict) or not all(
-                isinstance(block, dict) and isinstance(block.get('ros__parameters'), dict)
-                for block in content.values()):
-            raise ConfigError(f'the parameters file {path} must map a node name (such as '
-                              '/**/drive_bridge) to a ros__parameters block')
+        parts = path + [str(key).strip('/')]
+        if isinstance(value.get('ros__parameters'), dict):
+            blocks['/' + '/'.join(part for part in parts if part)] = value['ros__parameters']
+        else:
+            _collect_blocks(value, parts, blocks)
+
+
+def node_matches(key: str, node_fqn: str) -> bool:
+    """Return whether a parameters-file node key applies to the node ``node_fqn`` (as rcl)."""
+    if key in ('/**', '**'):
+        return True
+    pattern = '^' + re.escape(key.rstrip('/')).replace(r'/\*\*', '(/[^/]+)*').replace(
+        r'\*\*', '.*').replace(r'\*', '[^/]+') + '$'
+    return re.match(pattern, node_fqn) is not None
+
+
+def check_params_files(argv: List[str]) -> None:
+    """Raise ConfigError, in one line, for a ``--params-file`` that cannot be used."""
+    for position, argument in enumerate(argv):
+        if argument == '--params-file' and position + 1 < len(argv):
+            load_params_file(argv[position + 1])
+
+
+def select_block(path: str, node: Optional[str] = None) -> Dict[str, Any]:
+    """
+    Return the parameters of the block for node ``node`` (its full name), or the only one.
+
+    With several blocks and no ``node``, or no block matching it, raise ConfigError naming
+    the blocks there are.
+    """
+    blocks = load_params_file(path)
+    if node is not None:
+        fqn = node if node.startswith('/') else '/' + node
+        matching = [key for key in blocks if node_matches(key, fqn)]
+    else:
+        matching = list(blocks)
+    if len(matching) != 1:
+        what = f'for node {node}' if node else 'and no --node was given'
+        raise ConfigError(f'the parameters file {path} has {len(matching)} blocks {what}: '
+                          f'it has {", ".join(blocks)}; name one with --node')
+    return blocks[matching[0]]
+
+
+def split_parameters(parameters: Mapping[str, Any]) \
+        -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]]]:
+    """Split one node block into (bus values, device blocks by name)."""
+    bus: Dict[str, Any] = {}
+    devices: Dict[str, Dict[str, Any]] = {}
+    for key, value in parameters.items():
+        if isinstance(value, dict):
+            devices[str(key)] = dict(value)
+        elif '.' in str(key):  # flat form: device.setting
+            device, _, setting = str(key).partition('.')
+            devices.setdefault(device, {})[setting] = value
+        else:
+            bus[str(key)] = value
+    return bus, devices
 
 
 def write_params_file(path: str, bus: Dict[str, Any], devices: Dict[str, Dict[str, Any]],

@@ -55,9 +55,15 @@ class TruncatedFrame(BadFrame):
     kind = 'truncated'
 
 
+class LineBabble(LinkDown):
+    """Bytes keep arriving past the transaction's deadline: another master or a faulty device."""
+
+    kind = 'babble'
+
+
 # Every transaction failure kind, in the order /diagnostics lists them.
 FAILURE_KINDS = ('timeout', 'crc', 'wrong_address', 'truncated', 'bad_frame', 'exception',
-                 'nak', 'link')
+                 'nak', 'link', 'babble')
 
 
 class DeviceException(TransportError):
@@ -73,6 +79,14 @@ class DeviceException(TransportError):
 
 class CommandRefused(DriveBridgeError):
     """The bridge refused a command before sending anything."""
+
+
+class MonitorOnly(CommandRefused):
+    """A write to a monitor-only device (allow_control false): nothing was sent."""
+
+
+class CommandExpired(CommandRefused):
+    """A command that did not reach the wire within its deadline: it is never sent."""
 
 
 class ModelMismatch(DriveBridgeError):

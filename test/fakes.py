@@ -21,3 +21,30 @@ def run_for(bus, clock, seconds):
         wait = bus.run_once()
         if wait > 0:
             clock.now += min(wait, end - clock.now)
+
+
+def drive_cycle(profile, answer, control=None):
+    """
+    Run one poll cycle of ``profile`` with ``answer(request)`` giving each reply.
+
+    ``answer`` may also be a list of replies, in order. Returns (requests sent, reading).
+    """
+    from drive_bridge.devices.contracts import FixedControl
+    replies = list(answer) if isinstance(answer, (list, tuple)) else None
+    cycle = profile.poll(control or FixedControl())
+    requests = []
+    result = None
+    try:
+        step = next(cycle)
+        while True:
+            requests.append(step.request)
+            result = replies.pop(0) if replies is not None else answer(step.request)
+            step = cycle.send(result)
+    except StopIteration as done:
+        return requests, done.value
+
+
+def poll_requests(profile, control=None):
+    """Return the first request of a poll cycle of ``profile`` (without running it)."""
+    from drive_bridge.devices.contracts import FixedControl
+    return next(profile.poll(control or FixedControl())).request

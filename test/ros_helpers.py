@@ -164,9 +164,12 @@ class RosClient:
         self.reference_publishers[name].publish(Float32(data=float(percent)))
 
     def diagnostics(self, name: str):
+        """Return the latest status of device ``name`` (namespaced nodes: full name)."""
+        wanted = f'{self.prefix}drive_bridge: {name}' if self.prefix else \
+            f'drive_bridge: {name}'
         for array in reversed(self.messages['/diagnostics']):
             for status in array.status:
-                if status.name == f'drive_bridge: {name}':
+                if status.name == wanted:
                     return status
         return None
 

@@ -1,1 +1,1 @@
-"""bus layer."""
+"""The bus: one thread owns one bus (see :mod:`drive_bridge.bus.master`)."""

@@ -6,24 +6,30 @@ exchange takes the fewest transactions the manuals allow: control word and refer
 as coils 1-32 in one function 0F request, status word and main actual value read as coils
 33-64 in one function 01 request (manual 004 section 5.2.8, manual 003 "PCD Mapping").
 
-Keepalive and safety: nothing is written to a drive until a command arrives. From the first
-acknowledged command on, the control word and reference are rewritten every poll, so the
-drive's own control word timeout stops it when the bridge is gone. A drive that goes offline
-forgets the command: after it comes back, nothing is written until the next command.
+Keepalive and safety: which control word is in force is the bus's motor-state owner's to
+decide (:mod:`drive_bridge.bus.motor`); this profile writes what its control view says,
+every poll, so the drive's own control word timeout stops it when the bridge is gone, and
+nothing while the view has no command in force.
 """
 
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
-from drive_bridge.devices.base import (
-    CommandPlan, DeviceReading, ParameterPlan, PollItem, ReadCoils, ReadRegisters, WriteCoil,
-    WriteCoils, WriteRegister, WriteRegisters)
+from drive_bridge.devices.contracts import (
+    CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, ParameterAccess,
+    ParameterOptions, ParameterPlan, PollCycle, PollStep, SetupWrites, SpeedReference,
+    TRIP_CODE_UNKNOWN)
 from drive_bridge.devices.parameters import (
     decode_value, encode_value, parameter_address, ParameterSpec, TEXT)
-from drive_bridge.errors import CommandRefused, ConfigError, DeviceException, ModelMismatch
+from drive_bridge.errors import (
+    CommandRefused, ConfigError, DeviceException, ModelMismatch, ProtocolError)
 from drive_bridge.protocol import fc_control, fc_scaling
+from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.requests import (
+    ReadCoils, ReadRegisters, Request, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.protocol.words import coils_to_words, words_to_coils
+from drive_bridge.settings import Setting
 
 # The FC-profile process data as coils (both manuals): coil number - 1.
 COIL_CONTROL = 0  # coils 1-16 control word, 17-32 reference
@@ -77,13 +83,28 @@ class DriveFamilyData:
             known.characters if known else 20)
 
 
-class DriveProfile:
-    """FC-profile process data, readouts, commands and parameters of one drive."""
+def control_word_for(steady: Optional[Command]) -> Optional[int]:
+    """Return the FC-profile control word that carries ``steady`` (None: write nothing)."""
+    if steady is None:
+        return None
+    return fc_control.COMMAND_WORDS.get(steady, fc_control.RAMP_STOP_WORD)
+
+
+class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
+    """
+    What every FC-profile drive shares, whatever carries its telegrams (Modbus, FC protocol).
+
+    Model and identity, the readouts and their rotation, the decode of status word, main
+    actual value and readouts into a reading, trips from the alarm word, the reference
+    scaling and the commands' control words. Subclasses say how the data travels.
+    """
+
+    commands = frozenset({Command.START, Command.STOP, Command.QUICK_STOP, Command.COAST_STOP,
+                          Command.RESET})
 
     def __init__(self, data: DriveFamilyData, model: str = 'auto', current_scale: float = 1.0,
                  comms_timeout_s: float = 0.0, comms_timeout_function: int = -1,
-                 readout_overrides: Optional[Dict[str, int]] = None,
-                 drive_link_timeout_s: float = 0.0):
+                 readout_overrides: Optional[Dict[str, int]] = None):
         if model not in data.models:
             raise ConfigError(f'unknown {data.name} model {model!r}: allowed '
                               f'{", ".join(data.models)}')
@@ -91,159 +112,119 @@ class DriveProfile:
             raise ConfigError(f'comms_timeout_function applies to drives with a control word '
                               f'timeout function parameter (FC 8-04), not {data.name}: leave it '
                               'at -1 and set the drive on the drive')
-        if drive_link_timeout_s > 0 and data.drive_link_timeout_register is None:
-            raise ConfigError(f'drive_link_timeout applies to the VLT option card (register 3), '
-                              f'not {data.name}: leave it at 0')
-        for label, seconds in (('comms_timeout', comms_timeout_s),
-                               ('drive_link_timeout', drive_link_timeout_s)):
-            if data.timeout_register is not None and round(seconds * 100) > 0xFFFF:
-                raise ConfigError(f'{label} = {seconds} s does not fit the option card '
-                                  'register (10 ms units): allowed up to 655.35 s')
-        self.drive_link_timeout_s = drive_link_timeout_s
+        super().__init__(model)
         self.data = data
         self.family = data.name
-        self.configured_model = model
-        self.model: Optional[str] = None if model == 'auto' else model
         self.current_scale = current_scale
         self.comms_timeout_s = comms_timeout_s
         self.comms_timeout_function = comms_timeout_function
         self.readout_overrides = dict(readout_overrides or {})
-        self.control_word: Optional[int] = None  # None: nothing commanded, no keepalive
-        self.reference_pct = 0.0
-        self.reference_word = 0
         self.reached_reference = False
         self.identity: Dict[str, str] = {}
         self._identified = data.identify_parameter is None
         self._values: Dict[str, object] = {}
         self._rotation = 0
-        self._plan_keys: List[str] = []
 
     # -- model and readouts -------------------------------------------------------------
     @property
     def default_model(self) -> str:
         """Return the model whose map is used until the drive tells its own."""
-        return self.model or next(model for model in self.data.models if model != 'auto')
+        return self.resolved_model or next(model for model in self.data.models
+                                           if model != 'auto')
 
     @property
     def readouts(self) -> Dict[str, ParameterSpec]:
         """Return readout name -> parameter spec for the resolved model."""
-        model = self.default_model
-        numbers = dict(self.data.readouts[model], **self.readout_overrides)
+        numbers = dict(self.data.readouts[self.default_model], **self.readout_overrides)
         return {name: self.data.spec(number) for name, number in numbers.items()}
 
     @property
-    def commanded_run(self) -> Optional[bool]:
-        """Return whether the bridge's control word asks to run (None: nothing sent yet)."""
-        if self.control_word is None:
-            return None
-        return fc_control.is_start(self.control_word)
+    def reading_fields(self) -> FrozenSet[str]:
+        """Return speed feedback and the readouts this model has (current, thermal, words)."""
+        names = set(self.readouts)
+        fields = {'speed_feedback'}
+        for field_name, readout in (('motor_current', 'motor_current'),
+                                    ('motor_temperature', 'motor_thermal'),
+                                    ('alarm_word', 'alarm_word'),
+                                    ('warning_word', 'warning_word')):
+            if readout in names:
+                fields.add(field_name)
+        return frozenset(fields)
 
     def on_offline(self) -> None:
-        """Forget the command and every value read: after a reconnect nothing is written."""
-        self.control_word = None
+        """Forget every value read: the drive may come back as another one."""
         self.reached_reference = False
         self._values.clear()
         self._identified = self.data.identify_parameter is None
 
-    # -- polling ------------------------------------------------------------------------
-    def poll_plan(self) -> List[PollItem]:
-        """Return one cycle: identify once, keepalive write, status coils, readouts."""
-        items: List[PollItem] = []
-        if not self._identified:
-            for key, number in self._identity_parameters():
-                if number is not None:
-                    items.append(PollItem(self._read(self.data.spec(number)), key, True))
-        if self.control_word is not None:
-            items.append(PollItem(self.process_write(self.control_word), 'keepalive'))
-        items.append(PollItem(ReadCoils(COIL_STATUS, PROCESS_COILS), 'status'))
-        readouts = self.readouts
-        for name in ALWAYS_READ:
-            if name in readouts:
-                items.append(PollItem(self._read(readouts[name]), name))
-        rotating = [name for name in readouts if name not in ALWAYS_READ]
-        if rotating:
-            name = rotating[self._rotation % len(rotating)]
-            self._rotation += 1
-            items.append(PollItem(self._read(readouts[name]), name))
-        self._plan_keys = [item.key for item in items]
-        return items
+    def identity_parameters(self) -> Tuple[Tuple[str, int], ...]:
+        """Return the (key, parameter) pairs still to read to identify the drive."""
+        if self._identified:
+            return ()
+        pairs = (('drive_type', self.data.identify_parameter),
+                 ('software_version', self.data.version_parameter))
+        return tuple((key, number) for key, number in pairs if number is not None)
 
-    def follow_up_plan(self, results: list) -> List[PollItem]:
-        """After the status read: fetch the alarm/warning word now if the drive trips or warns."""
-        status = self._status_from(results)
-        if status is None:
-            return []
+    def next_rotating_readout(self) -> Optional[str]:
+        """Return the slow readout whose turn it is this poll (they take turns)."""
+        rotating = [name for name in self.readouts if name not in ALWAYS_READ]
+        if not rotating:
+            return None
+        name = rotating[self._rotation % len(rotating)]
+        self._rotation += 1
+        return name
+
+    def follow_up_readouts(self, status: StatusWord, read: List[str]) -> List[str]:
+        """Return the readouts to fetch now because the drive trips or warns (not yet read)."""
         wanted = []
         if status.tripped:
             wanted.append('alarm_word')
         if status.flag(fc_control.STW_WARNING):
             wanted.append('warning_word')
-        readouts = self.readouts
-        items = [PollItem(self._read(readouts[name]), name) for name in wanted
-                 if name in readouts and name not in self._plan_keys]
-        self._plan_keys += [item.key for item in items]
-        return items
+        return [name for name in wanted if name in self.readouts and name not in read]
 
-    def _status_from(self, results: list) -> Optional[StatusWord]:
-        for key, result in zip(self._plan_keys, results):
-            if key == 'status' and isinstance(result, list):
-                return StatusWord(coils_to_words(result[:16])[0])
-        return None
+    def take_readout(self, name: str, value: object) -> None:
+        """Keep the decoded value of readout ``name`` (display units)."""
+        self._values[name] = value
 
-    @staticmethod
-    def _read(spec: ParameterSpec) -> ReadRegisters:
-        return ReadRegisters(spec.address, spec.registers, exact=spec.data_type != TEXT)
-
-    def process_write(self, control_word: int) -> WriteCoils:
-        """Return the one write of control word and reference (coils 1-32)."""
-        return WriteCoils(COIL_CONTROL, words_to_coils([control_word, self.reference_word]))
-
-    def decode(self, results: list) -> DeviceReading:
-        """Decode one cycle's results (aligned with the last plan) into a reading."""
-        by_key = dict(zip(self._plan_keys, results))
-        if not isinstance(by_key.get('status'), list) or len(by_key['status']) < 32:
-            raise ValueError('status coils 33-64 missing from the reply')
-        status_word, actual_word = coils_to_words(by_key['status'][:32])
-        self._identify(by_key)
-        for name, spec in self.readouts.items():
-            if isinstance(by_key.get(name), list):
-                self._values[name] = decode_value(spec, by_key[name],
-                                                  self.data.conversion_factors)
-        status = StatusWord(status_word)
-        if self.commanded_run and status.flag(fc_control.STW_ON_REFERENCE):
-            self.reached_reference = True
-        reading = DeviceReading(
-            state=status.state(self.commanded_run, self.reached_reference),
-            status_word=status_word, speed_feedback_pct=fc_scaling.word_to_percent(actual_word))
-        self._fill_readouts(reading)
-        self._fill_trip(reading, status)
-        self._fill_details(reading, status, actual_word)
-        return reading
-
-    def _identity_parameters(self) -> Tuple[Tuple[str, Optional[int]], ...]:
-        return (('drive_type', self.data.identify_parameter),
-                ('software_version', self.data.version_parameter))
-
-    def _identify(self, by_key: Dict[str, object]) -> None:
+    def take_identity(self, results: Dict[str, object]) -> None:
+        """Take the identity replies (text, or the error that refused the read)."""
         if self._identified:
             return
-        for key, number in self._identity_parameters():
-            result = by_key.get(key)
-            if isinstance(result, list):
-                self.identity[key] = str(decode_value(self.data.spec(number), result, {0: 1.0}))
-            elif isinstance(result, DeviceException):
+        for key, result in results.items():
+            if isinstance(result, DeviceException):
                 self.identity[key] = f'not readable ({self.data.explain_exception(result.code)})'
+            elif result is not None:
+                self.identity[key] = str(result)
         self._identified = True
         type_text = self.identity.get('drive_type', '')
         reported = self.data.model_from_type(type_text) if type_text else None
         if self.configured_model == 'auto':
-            self.model = reported or self.default_model
+            self.resolved_model = reported or self.default_model
         elif type_text.upper().startswith('FC') and reported != self.configured_model:
             self._identified = False  # ask again after the configuration is fixed
             raise ModelMismatch(
                 f'model mismatch: configured {self.configured_model} but the drive reports '
                 f'type {type_text!r} (par. {self.data.identify_parameter}); fix the model '
                 'parameter or the address')
+
+    # -- decode -------------------------------------------------------------------------
+    def reading(self, status_word: int, actual_word: int, control: ControlView) -> DeviceReading:
+        """Return the reading of one poll from its status word, actual value and readouts."""
+        steady = control.steady
+        commanded_run = None if steady is None else steady is Command.START
+        status = StatusWord(status_word)
+        if not commanded_run:
+            self.reached_reference = False
+        elif status.flag(fc_control.STW_ON_REFERENCE):
+            self.reached_reference = True
+        reading = DeviceReading(
+            state=status.state(commanded_run, self.reached_reference),
+            status_word=status_word, speed_feedback_pct=fc_scaling.word_to_percent(actual_word))
+        self._fill_readouts(reading)
+        self._fill_trip(reading, status)
+        self._fill_details(reading, status, actual_word, control)
+        return reading
 
     def _fill_readouts(self, reading: DeviceReading) -> None:
         values = self._values
@@ -266,23 +247,22 @@ class DriveProfile:
         reading.fault = f'tripped: {name}{locked}'
 
     def trip_from_alarm_word(self, alarm_word: Optional[int]) -> Tuple[int, str]:
-        """Return (trip code, name) of the first alarm bit set; names of all set bits."""
+        """Return (trip code, names of the set bits); unknown code while no bit is read."""
         if not alarm_word:
-            return 0, 'tripped (alarm word not read yet or empty)'
+            return TRIP_CODE_UNKNOWN, 'tripped (alarm word not read yet or empty)'
         codes = [self.data.alarm_bits.get(index, (1000 + index, f'alarm word bit {index}'))
                  for index in range(32) if alarm_word >> index & 1]
         return codes[0][0], ', '.join(name for _, name in codes)
 
-    def _fill_details(self, reading: DeviceReading, status: StatusWord,
-                      actual_word: int) -> None:
-        details = {'model': self.model or self.configured_model}
+    def _fill_details(self, reading: DeviceReading, status: StatusWord, actual_word: int,
+                      control: ControlView) -> None:
+        details = {'model': self.model}
         details.update(self.identity)
         details.update({name: str(value) for name, value in status.flags().items()})
         details['main_actual_value'] = f'0x{actual_word:04X}'
-        details['control_word_sent'] = ('none (no command yet)' if self.control_word is None
-                                        else f'0x{self.control_word:04X}')
-        details['reference_pct'] = f'{self.reference_pct:g}'
-        details['reference_word'] = f'0x{self.reference_word:04X}'
+        details['control_word_sent'] = self.describe_control(control)
+        details['reference_word'] = f'0x{control.reference_word:04X}'
+        details['reference_pct'] = f'{fc_scaling.word_to_percent(control.reference_word):g}'
         for name, value in self._values.items():
             details[name] = f'{value:g}' if isinstance(value, float) else str(value)
         reading.warnings.extend(status.warnings())
@@ -295,55 +275,124 @@ class DriveProfile:
             reading.warnings.append('local operation: the drive ignores bus commands')
         reading.details = details
 
+    def describe_control(self, control: ControlView) -> str:
+        """Return the control word the keepalive writes, in words."""
+        word = control_word_for(control.steady)
+        return 'none (no command yet)' if word is None else f'0x{word:04X}'
+
     # -- commands -----------------------------------------------------------------------
-    def check_command(self, command: str, reading: Optional[DeviceReading]) -> None:
+    def check_command(self, command: Command, reading: Optional[DeviceReading]) -> None:
         """Refuse a command the drive would ignore (local operation), before sending."""
         if reading is not None and not StatusWord(reading.status_word).bus_control:
             raise CommandRefused(
                 'drive is in local operation (status word bit 9 = 0: Hand on or Off on the '
                 'LCP): it ignores bus commands; press Auto on at the drive; nothing sent')
 
-    def command_plan(self, command: str) -> CommandPlan:
-        """Return the process-data writes of ``command``; commit the word on acknowledge."""
-        if command == 'reset':
-            # Reset acts on the rising edge of bit 7; it leaves the drive in ramp stop so a
-            # reset never restarts a motor.
+    def command_words(self, command: Command) -> Tuple[int, ...]:
+        """
+        Return the control words that carry out ``command``, in order.
+
+        Reset acts on the rising edge of bit 7 and leaves the drive in ramp stop, so a
+        reset never restarts a motor.
+        """
+        if command is Command.RESET:
             word = fc_control.RAMP_STOP_WORD
-            writes = (self.process_write(fc_control.with_reset(word)), self.process_write(word))
-        elif command in fc_control.COMMAND_WORDS:
-            word = fc_control.COMMAND_WORDS[command]
-            writes = (self.process_write(word),)
-        else:
-            raise CommandRefused(f'drives have no {command} command (allowed: start, stop, '
-                                 'quick_stop, coast_stop, reset)')
+            return fc_control.with_reset(word), word
+        word = fc_control.COMMAND_WORDS.get(command)
+        if word is None:
+            raise CommandRefused(f'drives have no {command.value} command (allowed: start, '
+                                 'stop, quick_stop, coast_stop, reset)')
+        return (word,)
 
-        def acknowledged() -> None:
-            if command == 'start' and not self.commanded_run:
-                self.reached_reference = False
-            self.control_word = word
-
-        def failed() -> None:
-            # A stop was asked for: the keepalive repeats it, never the old run word. A
-            # start that failed is not repeated: the keepalive keeps the old word.
-            if not fc_control.is_start(word):
-                self.control_word = word
-        return CommandPlan(command, writes, acknowledged, failed)
-
-    def set_reference(self, percent: float) -> int:
-        """Take a speed reference in percent (FC scaling); raise CommandRefused if invalid."""
+    def reference_word(self, percent: float) -> int:
+        """Return the reference word of ``percent`` (FC scaling); raise CommandRefused."""
         try:
-            word = fc_scaling.percent_to_word(percent)
+            return fc_scaling.percent_to_word(percent)
         except (ValueError, TypeError) as error:
             raise CommandRefused(f'{error}: nothing sent') from None
-        self.reference_pct = float(percent)
-        self.reference_word = word
-        return word
+
+    def explain_exception(self, code: int, detail: Optional[int] = None) -> str:
+        """Return technician text for a refusal code from the drive."""
+        return self.data.explain_exception(code, detail)
+
+
+class DriveProfile(FcProfileDrive, ParameterAccess):
+    """
+    An FC-profile drive over Modbus RTU: FC 51 built-in, VLT 5000/6000 option card.
+
+    One cycle: identify once, the keepalive write of coils 1-32 (control word and
+    reference) when a command is in force, the status coils 33-64, motor current, one
+    rotating readout, and the alarm/warning word at once when the status word shows a trip
+    or a warning.
+    """
+
+    def __init__(self, data: DriveFamilyData, model: str = 'auto', current_scale: float = 1.0,
+                 comms_timeout_s: float = 0.0, comms_timeout_function: int = -1,
+                 readout_overrides: Optional[Dict[str, int]] = None,
+                 drive_link_timeout_s: float = 0.0):
+        if drive_link_timeout_s > 0 and data.drive_link_timeout_register is None:
+            raise ConfigError(f'drive_link_timeout applies to the VLT option card (register 3), '
+                              f'not {data.name}: leave it at 0')
+        for label, seconds in (('comms_timeout', comms_timeout_s),
+                               ('drive_link_timeout', drive_link_timeout_s)):
+            if data.timeout_register is not None and round(seconds * 100) > 0xFFFF:
+                raise ConfigError(f'{label} = {seconds} s does not fit the option card '
+                                  'register (10 ms units): allowed up to 655.35 s')
+        super().__init__(data, model, current_scale, comms_timeout_s, comms_timeout_function,
+                         readout_overrides)
+        self.drive_link_timeout_s = drive_link_timeout_s
+
+    # -- polling ------------------------------------------------------------------------
+    def poll(self, control: ControlView) -> PollCycle:
+        """Return one cycle (see the class docstring)."""
+        identity = {}
+        for key, number in self.identity_parameters():
+            identity[key] = yield PollStep(self._read(self.data.spec(number)), optional=True)
+        self.take_identity({key: self._identity_value(key, result)
+                            for key, result in identity.items()})
+        word = control_word_for(control.steady)  # built now: what is in force at this moment
+        if word is not None:
+            yield PollStep(self.process_write(word, control.reference_word), optional=True,
+                           retry=False)
+        coils = yield PollStep(ReadCoils(COIL_STATUS, PROCESS_COILS))
+        if not isinstance(coils, list) or len(coils) < PROCESS_COILS:
+            raise ProtocolError('status coils 33-64 missing from the reply')
+        status_word, actual_word = coils_to_words(coils[:PROCESS_COILS])
+        read = [name for name in ALWAYS_READ if name in self.readouts]
+        rotating = self.next_rotating_readout()
+        if rotating is not None:
+            read.append(rotating)
+        read += self.follow_up_readouts(StatusWord(status_word), read)
+        for name in read:
+            spec = self.readouts[name]
+            registers = yield PollStep(self._read(spec))
+            self.take_readout(name, decode_value(spec, registers, self.data.conversion_factors))
+        return self.reading(status_word, actual_word, control)
+
+    def _identity_value(self, key: str, result: object) -> object:
+        if not isinstance(result, list):
+            return result
+        number = dict(self.identity_parameters())[key]
+        return decode_value(self.data.spec(number), result, {0: 1.0})
+
+    @staticmethod
+    def _read(spec: ParameterSpec) -> ReadRegisters:
+        return ReadRegisters(spec.address, spec.registers, exact=spec.data_type != TEXT)
+
+    def process_write(self, control_word: int, reference_word: int) -> WriteCoils:
+        """Return the one write of control word and reference (coils 1-32)."""
+        return WriteCoils(COIL_CONTROL, words_to_coils([control_word, reference_word]))
+
+    def command_plan(self, command: Command, control: ControlView) -> CommandPlan:
+        """Return the process-data writes of ``command`` (with the reference in force)."""
+        return CommandPlan(command, tuple(self.process_write(word, control.reference_word)
+                                          for word in self.command_words(command)))
 
     # -- set-up writes ------------------------------------------------------------------
-    def setup_plan(self) -> List[object]:
+    def setup_plan(self) -> List[Request]:
         """Return the writes that configure the drive's own comms timeout (none by default)."""
         data = self.data
-        writes: List[object] = []
+        writes: List[Request] = []
         if self.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
             spec = data.spec(data.timeout_time_parameter)
             writes.append(self._write(spec, encode_value(spec, self.comms_timeout_s,
@@ -358,21 +407,20 @@ class DriveProfile:
         return writes
 
     @staticmethod
-    def _write(spec: ParameterSpec, registers: list):
+    def _write(spec: ParameterSpec, registers: list) -> Request:
         if len(registers) == 1 and spec.data_type != TEXT:
             return WriteRegister(spec.address, registers[0])
         return WriteRegisters(spec.address, tuple(registers))
 
     # -- parameters ---------------------------------------------------------------------
-    def parameter_plan(self, number: int, value=None, data_type: Optional[str] = None,
-                       conversion: Optional[int] = None, index: Optional[int] = None,
-                       eeprom: bool = False) -> ParameterPlan:
+    def parameter_plan(self, number: int, value: Any = None,
+                       options: ParameterOptions = ParameterOptions()) -> ParameterPlan:
         """Return the transactions reading (value None) or writing parameter ``number``."""
-        spec = self.data.spec(number, data_type, conversion)
+        spec = self.data.spec(number, options.data_type, options.conversion)
         parameter_address(number)
-        before: List[object] = []
-        after: List[object] = []
-        index_word = self._index_word(spec, index, value is not None)
+        before: List[Request] = []
+        after: List[Request] = []
+        index_word = self._index_word(spec, options.index, value is not None)
         if index_word is not None:
             before.append(WriteRegister(self.data.index_register, index_word))
             if spec.data_type == TEXT and self.data.text_read_index is not None:
@@ -385,12 +433,16 @@ class DriveProfile:
                                                               factors))
         registers = encode_value(spec, value, self.data.conversion_factors)
         if self.data.eeprom_coil is not None:
-            before.insert(0, WriteCoil(self.data.eeprom_coil, bool(eeprom)))
-        elif eeprom:
+            before.insert(0, WriteCoil(self.data.eeprom_coil, bool(options.eeprom)))
+        elif options.eeprom:
             raise CommandRefused(f'{self.family} drives have no EEPROM store coil')
         return ParameterPlan(f'write {spec.name} = {value!r}',
                              (*before, self._write(spec, registers), *after),
                              lambda results: f'{spec.name} = {value!r} acknowledged')
+
+    def parameter_numbers(self) -> Sequence[int]:
+        """Return the settings of the family's table (readouts excluded)."""
+        return [number for number in self.data.parameters if self.data.is_setting(number)]
 
     def _index_word(self, spec: ParameterSpec, index: Optional[int],
                     write: bool) -> Optional[int]:
@@ -406,17 +458,45 @@ class DriveProfile:
             raise CommandRefused(f'array index {index} is out of range 0-255')
         return index
 
-    def detail_plan(self, code: int) -> Optional[ReadRegisters]:
+    def detail_request(self, code: int) -> Optional[Request]:
         """Return the read that explains exception ``code`` (FC: register 7 after 04)."""
         if code == 4 and self.data.detail_register is not None:
             return ReadRegisters(self.data.detail_register, 1)
         return None
 
-    def explain_exception(self, code: int, detail: Optional[int] = None) -> str:
-        """Return technician text for a Modbus exception from the drive."""
-        return self.data.explain_exception(code, detail)
-
 
 def _bit_names(word: int, names: Dict[int, str]) -> str:
     set_bits = [names.get(index, f'bit {index}') for index in range(32) if word >> index & 1]
     return ', '.join(set_bits) or 'none'
+
+
+# Device settings every FC-profile drive family takes (beyond the common ones).
+COMMS_TIMEOUT = Setting(
+    'comms_timeout', float, 0.0,
+    "drives: the drive's own control word timeout in seconds, written when the drive comes "
+    'online (FC: par. 8-03; VLT option card: register 2); 0 = leave the drive as set',
+    low=0.0, high=6000.0)
+CURRENT_PARAMETER = Setting(
+    'current_parameter', int, 0,
+    "drives: parameter number of the motor current readout; 0 = the model's own (FC 51: "
+    '1614 = 16-14; VLT 5000: 520; VLT 6000: 514)', low=0, high=6553)
+
+
+def make_drive_profile(data: DriveFamilyData) -> Callable[[str, str, Mapping[str, Any]],
+                                                          DeviceProfile]:
+    """Return the profile factory of a drive family (Modbus RTU: :class:`DriveProfile`)."""
+    def make(model: str, protocol: str, options: Mapping[str, Any]) -> DeviceProfile:
+        overrides = {'motor_current': options['current_parameter']} \
+            if options.get('current_parameter') else {}
+        return DriveProfile(data, model, options.get('current_scale', 1.0),
+                            options.get('comms_timeout', 0.0),
+                            options.get('comms_timeout_function', -1), overrides,
+                            options.get('drive_link_timeout', 0.0))
+    return make
+
+
+def make_drive_simulator(model: str, now_s: float, **settings: Any) -> Any:
+    """Return a simulated drive of ``model`` with its Modbus face (see :mod:`..sim`)."""
+    from drive_bridge.sim.fc_device import FcSimDevice
+    from drive_bridge.sim.fc_model import FcModel, FcSimConfig
+    return FcSimDevice(FcModel(FcSimConfig(model=model, **settings), now_s))

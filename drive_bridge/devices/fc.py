@@ -8,8 +8,11 @@ Other FC-series drives share this map; a new model is a new entry in ``MODELS``/
 
 from typing import Dict, Optional, Tuple
 
-from drive_bridge.devices.drive import DriveFamilyData
+from drive_bridge.devices.contracts import Family
+from drive_bridge.devices.drive import (
+    COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile, make_drive_simulator)
 from drive_bridge.devices.parameters import FC_CONVERSION_FACTORS, ParameterSpec, TEXT
+from drive_bridge.settings import Setting
 
 FAMILY = 'fc'
 MODELS = ('auto', 'fc51')
@@ -158,3 +161,17 @@ DATA = DriveFamilyData(
     timeout_time_parameter=803, timeout_function_parameter=804,
     parameter_label=parameter_label,
     is_setting=lambda number: number // 100 not in (15, 16))  # groups 15/16: read-only info
+
+COMMS_TIMEOUT_FUNCTION = Setting(
+    'comms_timeout_function', int, -1,
+    'drives: what the drive does on a control word timeout (FC: par. 8-04; 0 off, 1 freeze, '
+    '2 stop, 3 jog, 4 max speed, 5 stop and trip); -1 = leave as set',
+    choices=(-1, 0, 1, 2, 3, 4, 5))
+
+ENTRY = Family(
+    name=FAMILY, description='VLT Micro Drive FC 51, built-in Modbus RTU',
+    models=MODELS, address_range=ADDRESS_RANGE,
+    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'),
+    settings=(COMMS_TIMEOUT, COMMS_TIMEOUT_FUNCTION, CURRENT_PARAMETER),
+    make_profile=make_drive_profile(DATA), sim_models=('fc51',),
+    make_simulator=make_drive_simulator, reference=True)

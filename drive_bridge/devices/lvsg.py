@@ -7,22 +7,26 @@ The gateway exposes the slave's LVSG process image as Modbus registers: the inpu
 first, is the gateway's configuration, so it is the device's configuration here. Tables:
 :mod:`drive_bridge.protocol.lvsg` (manual ``002_8ae547a04c1e19a0.txt``).
 
-The bridge adopts the output image it reads back from the gateway at first contact and then
-owns it: the control bits stay as they were until a command arrives, except that Fwd Run is
-never kept where it could start a motor nobody asked to start (see
-:meth:`LvsgProfile._never_start_unasked`); the extended module's parameter request (1, 2, 3,
-4 in turn) is rewritten every poll.
+The bridge reads the output image back from the gateway at first contact. Until a command
+is in force it writes no control bits, except to clear a Fwd Run that could start a starter
+that is not on (see :meth:`LvsgProfile.poll`); the extended module's parameter request (1,
+2, 3, 4 in turn) is written every poll unless the device is monitor-only. Which command is
+in force is the bus's motor-state owner's to decide.
 """
 
 from dataclasses import replace
-from typing import Dict, List, Optional
+from typing import Any, Dict, FrozenSet, Mapping, Optional
 
-from drive_bridge.devices.base import (
-    CommandPlan, DeviceReading, PollItem, ReadRegisters, WriteRegister, WriteRegisters)
+from drive_bridge.devices.contracts import (
+    CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Family, PollCycle,
+    PollStep, TRIP_CODE_UNKNOWN)
 from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
 from drive_bridge.protocol import lvsg
+from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.lvsg import Control
+from drive_bridge.protocol.requests import ReadRegisters, Request, WriteRegister, WriteRegisters
 from drive_bridge.protocol.words import bit, bytes_to_registers, registers_to_bytes
+from drive_bridge.settings import Setting
 
 FAMILY = 'lvsg'
 MODELS = ('auto', 'mcd201', 'mcd202')
@@ -38,10 +42,11 @@ GATEWAY_EXCEPTIONS: Dict[int, str] = {
 }
 
 
-class LvsgProfile:
+class LvsgProfile(DeviceProfile, CyclicControl):
     """Process image, decode and commands of one MCD 200 behind a Profibus gateway."""
 
     family = FAMILY
+    commands = frozenset({Command.START, Command.STOP, Command.QUICK_STOP, Command.RESET})
 
     def __init__(self, model: str = 'auto', current_scale: float = 1.0,
                  input_register: int = 0, output_register: int = 0,
@@ -51,8 +56,7 @@ class LvsgProfile:
         if module not in MODULES or byte_order not in BYTE_ORDERS:
             raise ConfigError(f'lvsg module must be one of {MODULES}, byte order one of '
                               f'{BYTE_ORDERS}')
-        self.configured_model = model
-        self.model: Optional[str] = None if model == 'auto' else model
+        super().__init__(model)
         self.current_scale = current_scale
         self.input_register = input_register
         self.output_register = output_register
@@ -62,11 +66,10 @@ class LvsgProfile:
             lvsg.BASIC_INPUT_BYTES
         self.output_bytes = lvsg.EXTENDED_OUTPUT_BYTES if self.extended else \
             lvsg.BASIC_OUTPUT_BYTES
-        self.control: Optional[Control] = None  # None: not adopted from the gateway yet
-        self.commanded = False  # a command arrived since the last (re)connect
+        self.image: Optional[Control] = None  # the gateway's control bits (None: not read yet)
         self.request = lvsg.PARAMETER_PRODUCT
         self.values: Dict[int, int] = {}
-        self._keys: List[str] = []
+        self.hazard = ''
 
     @property
     def input_registers(self) -> int:
@@ -78,35 +81,36 @@ class LvsgProfile:
         """Return how many registers hold the output bytes."""
         return (self.output_bytes + 1) // 2
 
+    @property
+    def reading_fields(self) -> FrozenSet[str]:
+        """Return current and temperature: the extended module reads them (not an MCD 201)."""
+        if not self.extended or self.resolved_model == 'mcd201':
+            return frozenset()
+        return frozenset({'motor_current', 'motor_temperature'})
+
     def on_offline(self) -> None:
-        """Forget the image and the command: after a reconnect it is adopted again."""
-        self.control = None
-        self.commanded = False
+        """Forget the image and the answers: after a reconnect the image is read again."""
+        self.image = None
         self.values.clear()
         self.request = lvsg.PARAMETER_PRODUCT
+        self.hazard = ''
 
-    # -- polling ------------------------------------------------------------------------
-    def poll_plan(self) -> List[PollItem]:
-        """Return one poll: adopt or write the output image, then read the input image."""
-        items = []
-        if self.control is None:
-            items.append(PollItem(ReadRegisters(self.output_register, self.output_registers),
-                                  'output', optional=True))
-        elif self.commanded:
-            items.append(PollItem(self.image_write(self.control), 'write'))
-        elif self.extended:  # no command yet: the parameter request alone, never control
-            items.append(PollItem(self.request_write(), 'write'))
-        items.append(PollItem(ReadRegisters(self.input_register, self.input_registers),
-                              'input'))
-        self._keys = [item.key for item in items]
-        return items
+    # -- the image --------------------------------------------------------------------------
+    @staticmethod
+    def control_for(steady: Command) -> Control:
+        """Return the control bits that carry ``steady`` (Fwd Run only for a start)."""
+        if steady is Command.START:
+            return Control(fwd_run=True)
+        if steady is Command.QUICK_STOP:
+            return Control(quick_stop=True)
+        return Control()
 
     def request_write(self) -> WriteRegister:
         """Return the write of the register holding the parameter request (output byte 2)."""
-        image = self.image_write(self.control or Control())  # extended: two registers
+        image = self.image_write(self.image or Control())  # extended: two registers
         return WriteRegister(self.output_register + 1, image.values[1])
 
-    def image_write(self, control: Control):
+    def image_write(self, control: Control) -> Request:
         """Return the write of the whole output image carrying ``control``."""
         registers = bytes_to_registers(
             replace(control, parameter_request=self.request).encode(self.extended),
@@ -115,42 +119,77 @@ class LvsgProfile:
             return WriteRegister(self.output_register, registers[0])
         return WriteRegisters(self.output_register, tuple(registers))
 
-    def decode(self, results: list) -> DeviceReading:
-        """Decode one poll into a reading."""
-        by_key = dict(zip(self._keys, results))
-        if 'output' in by_key:
-            self._adopt(by_key['output'])
-        if not isinstance(by_key.get('input'), list):
+    def describe_control(self, control: ControlView) -> str:
+        """Return the control bits the gateway holds, in words."""
+        image = self.image
+        if image is None:
+            return 'not read yet'
+        bits = [name for name, on in (('Fwd Run', image.fwd_run),
+                                      ('Quick Stop', image.quick_stop)) if on]
+        owner = 'written by the bridge' if control.steady is not None else 'as read back'
+        return f'{", ".join(bits) or "no control bits"} ({owner})'
+
+    # -- polling ------------------------------------------------------------------------
+    def poll(self, control: ControlView) -> PollCycle:
+        """
+        One poll: read back or write the output image, read the input image.
+
+        At first contact the output image is read back. While a command is in force the
+        whole image is written each poll (the keepalive); before that, the extended module's
+        parameter request alone (never the control bits). A Fwd Run held in the gateway for
+        a starter that is not on would start it (manual 002: leaving Clear mode with Fwd Run
+        set restarts the motor): the image is written back with Fwd Run clear, the one write
+        allowed before a command, or reported as a hazard when nothing may be written.
+        """
+        if self.image is None:
+            self._adopt((yield PollStep(ReadRegisters(self.output_register,
+                                                      self.output_registers), optional=True)))
+        steady = control.steady
+        if steady is not None and control.writes_allowed:
+            self.image = self.control_for(steady)
+            yield PollStep(self.image_write(self.image), optional=True, retry=False)
+        elif self.extended and control.writes_allowed:
+            yield PollStep(self.request_write(), optional=True, retry=False)
+        registers = yield PollStep(ReadRegisters(self.input_register, self.input_registers))
+        if not isinstance(registers, list):
             raise ProtocolError('input image missing from the replies')
-        status = lvsg.decode_status(registers_to_bytes(by_key['input'], self.input_bytes,
+        status = lvsg.decode_status(registers_to_bytes(registers, self.input_bytes,
                                                        self.byte_order))
         if self.extended:
             self._take_answer(status)
-        self._never_start_unasked(status)
+        if control.steady is None:  # asked again: a command may have gone out meanwhile
+            yield from self._clear_unasked_fwd_run(status, control)
         self._resolve_model()
         return self._reading(status)
 
-    def _never_start_unasked(self, status: lvsg.Status) -> None:
-        """
-        Clear Fwd Run in the image the bridge rewrites when keeping it could start a motor.
-
-        A trip ends a run command (a local reset must not restart the motor), and an adopted
-        Fwd Run on a starter that is not on would start it (the gateway may hold Fwd Run
-        from an earlier master, or leave Clear mode with it set).
-        """
-        control = self.control
-        if control is None or not control.fwd_run:
+    def _clear_unasked_fwd_run(self, status: lvsg.Status, control: ControlView):
+        """Write Fwd Run clear if the gateway holds it for a starter that is not on."""
+        image = self.image
+        if image is None or not image.fwd_run or status.on:
+            self.hazard = ''
             return
-        if status.fault or (not self.commanded and not status.on):
-            self.control = replace(control, fwd_run=False)
+        if not control.writes_allowed:
+            self.hazard = ('HAZARD: the gateway holds Fwd Run for a starter that is not on: '
+                           'it starts when the DP master leaves Clear mode or the trip is '
+                           'reset; nothing written (monitor only): clear Fwd Run at the '
+                           'master that set it')
+            return
+        cleared = replace(image, fwd_run=False, reset=False)
+        result = yield PollStep(self.image_write(cleared), optional=True, retry=False)
+        if isinstance(result, Exception):
+            self.hazard = ('HAZARD: the gateway holds Fwd Run for a starter that is not on and '
+                           f'clearing it failed ({result}); it will be tried again')
+            return
+        self.image = cleared
+        self.hazard = ''
 
     def _adopt(self, result) -> None:
         if isinstance(result, list):
-            self.control = Control.decode(registers_to_bytes(result, self.output_bytes,
-                                                             self.byte_order))
-        else:  # the gateway cannot read its outputs back: start from all bits clear
-            self.control = Control()
-        self.control = replace(self.control, reset=False)
+            control = Control.decode(registers_to_bytes(result, self.output_bytes,
+                                                        self.byte_order))
+        else:  # the gateway cannot read its outputs back: take all bits as clear
+            control = Control()
+        self.image = replace(control, reset=False)
 
     def _take_answer(self, status: lvsg.Status) -> None:
         if status.parameter == self.request and not status.invalid_parameter:
@@ -178,7 +217,7 @@ class LvsgProfile:
             temperature & 0xFF == lvsg.MCD201_TEMPERATURE_PLACEHOLDER
         reported = 'mcd201' if is_201 else 'mcd202'
         if self.configured_model == 'auto':
-            self.model = reported
+            self.resolved_model = reported
         elif reported != self.configured_model and is_201:
             raise ModelMismatch(f'model mismatch: configured {self.configured_model} but the '
                                 'slave reads current 2222 and temperature 111, as an MCD 201')
@@ -193,11 +232,12 @@ class LvsgProfile:
             if trip_code not in (None, lvsg.NO_TRIP):
                 reading.trip_code, reading.trip_name = trip_code, lvsg.trip_name(trip_code)
             else:
+                reading.trip_code = TRIP_CODE_UNKNOWN
                 reading.trip_name = 'tripped (trip code not known: ' + (
                     'read it in the diagnostic telegram)' if not self.extended
                     else 'not read yet)')
             reading.fault = f'tripped: {reading.trip_name}'
-        if self.model != 'mcd201':
+        if self.resolved_model != 'mcd201':
             current = self.values.get(lvsg.PARAMETER_CURRENT)
             if current is not None:
                 reading.motor_current_a = float(current) * self.current_scale
@@ -209,6 +249,8 @@ class LvsgProfile:
             reading.fault = 'communication failure between the Profibus Module and the MCD 200'
         if state_byte is not None and bit(state_byte, lvsg.STATE_BIT_CURRENT_ABOVE_FLC):
             reading.warnings.append('motor current exceeds FLC')
+        if self.hazard:
+            reading.fault = self.hazard + (f'; {reading.fault}' if reading.fault else '')
         return reading
 
     def _state(self, status: lvsg.Status, state_byte: Optional[int]) -> str:
@@ -218,7 +260,9 @@ class LvsgProfile:
         if status.on and status.ramping:
             if known in ('starting', 'stopping'):
                 return known
-            return 'starting' if self.control and self.control.fwd_run else 'stopping'
+            # The basic module has no state byte: the Fwd Run the gateway holds tells a
+            # start ramp (set) from a stop ramp (clear).
+            return 'starting' if self.image is not None and self.image.fwd_run else 'stopping'
         if status.on:
             return 'running'
         if status.ready:
@@ -233,14 +277,13 @@ class LvsgProfile:
 
     def _details(self, status: lvsg.Status, state_byte: Optional[int]) -> Dict[str, str]:
         details = {
-            'model': self.model or 'auto (waiting for operating parameters)',
+            'model': self.resolved_model or 'auto (waiting for operating parameters)',
             'module': 'extended' if self.extended else 'basic',
             'ready': str(status.ready), 'on': str(status.on), 'fault': str(status.fault),
             'ramping': str(status.ramping),
             'motor_current_pct_flc': f'{status.current_pct_flc:.0f}',
-            'control_fwd_run': str(bool(self.control and self.control.fwd_run)),
-            'control_quick_stop': str(bool(self.control and self.control.quick_stop)),
-            'commanded_since_connect': str(self.commanded),
+            'gateway_fwd_run': str(bool(self.image and self.image.fwd_run)),
+            'gateway_quick_stop': str(bool(self.image and self.image.quick_stop)),
         }
         product = self.values.get(lvsg.PARAMETER_PRODUCT)
         if product is not None:
@@ -255,40 +298,56 @@ class LvsgProfile:
         return details
 
     # -- commands -----------------------------------------------------------------------
-    def command_plan(self, command: str) -> CommandPlan:
-        """Return the output-image writes of ``command``; the image is committed on ack."""
-        base = self.control or Control()
-        if command == 'start':
+    def command_plan(self, command: Command, control: ControlView) -> CommandPlan:
+        """Return the output-image writes of ``command``."""
+        base = self.image or Control()
+        if command is Command.START:
             steps = [Control(fwd_run=True)]
-        elif command == 'stop':
+        elif command is Command.STOP:
             steps = [Control()]
-        elif command == 'quick_stop':  # Quick Stop set before Fwd Run is cleared
+        elif command is Command.QUICK_STOP:  # Quick Stop set before Fwd Run is cleared
             steps = [Control(fwd_run=base.fwd_run, quick_stop=True), Control(quick_stop=True)]
-        elif command == 'reset':  # a pulse on bit 3, with Fwd Run clear: never a restart
+        elif command is Command.RESET:  # a pulse on bit 3, with Fwd Run clear: never a restart
             steps = [Control(reset=True, quick_stop=base.quick_stop),
                      Control(quick_stop=base.quick_stop)]
         else:
-            raise CommandRefused(f'MCD 200 starters have no {command} command (allowed: '
+            raise CommandRefused(f'MCD 200 starters have no {command.value} command (allowed: '
                                  'start, stop, quick_stop, reset)')
-
-        def acknowledged() -> None:
-            self.control = steps[-1]
-            self.commanded = True
-
-        def failed() -> None:
-            # A stop, quick stop or reset was asked for: the image rewritten each cycle keeps
-            # Fwd Run clear from now on. A start that failed is not repeated.
-            if command != 'start':
-                acknowledged()
-        return CommandPlan(command, tuple(self.image_write(step) for step in steps),
-                           acknowledged, failed)
-
-    def parameter_plan(self, number: int, value=None):
-        """Refuse: the Profibus Module gives no parameter access (only parameters 1-4)."""
-        raise CommandRefused('the MCD 200 Profibus Module has no parameter access; the '
-                             'extended module reads operating parameters 1-4 by itself')
+        return CommandPlan(command, tuple(self.image_write(step) for step in steps))
 
     def explain_exception(self, code: int, detail: Optional[int] = None) -> str:
         """Return technician text for a Modbus exception from the gateway."""
         return f'{GATEWAY_EXCEPTIONS.get(code, "gateway exception")}, Modbus exception ' \
                f'{code:02d}'
+
+
+SETTINGS = (
+    Setting('gateway_input_register', int, None,
+            "lvsg: frame address of the first register holding the slave's input bytes "
+            '(status) in the gateway', low=0, high=65535),
+    Setting('gateway_output_register', int, None,
+            "lvsg: frame address of the first register holding the slave's output bytes "
+            '(control) in the gateway', low=0, high=65535),
+    Setting('gateway_byte_order', str, 'big',
+            'lvsg: big = the first process byte is the high byte of a register',
+            choices=BYTE_ORDERS),
+    Setting('lvsg_module', str, 'extended',
+            'lvsg: the GSD module configured in the DP master: basic or extended',
+            choices=MODULES),
+)
+
+
+def make_profile(model: str, protocol: str, options: Mapping[str, Any]) -> LvsgProfile:
+    """Return the profile of an MCD 200 behind a gateway from validated options."""
+    return LvsgProfile(model, options.get('current_scale', 1.0),
+                       options['gateway_input_register'], options['gateway_output_register'],
+                       options.get('gateway_byte_order', 'big'),
+                       options.get('lvsg_module', 'extended'))
+
+
+ENTRY = Family(
+    name=FAMILY, description='MCD 200 with the Profibus Module, through a DP-master gateway '
+    'that maps the LVSG process image to Modbus registers',
+    models=MODELS, address_range=ADDRESS_RANGE,
+    protocols=('modbus_tcp', 'rtu_over_tcp', 'modbus_rtu'), settings=SETTINGS,
+    make_profile=make_profile)

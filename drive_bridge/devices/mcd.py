@@ -7,11 +7,14 @@ Register numbers are the manual's 1-based numbers; the frame address is number -
 """
 
 from dataclasses import dataclass
-from typing import Dict, FrozenSet, List, Optional, Tuple
+from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
-from drive_bridge.devices.base import (
-    CommandPlan, DeviceReading, ParameterPlan, ReadRegisters, WriteRegister)
+from drive_bridge.devices.contracts import (
+    CommandPlan, ControlView, DeviceProfile, DeviceReading, Family, ParameterAccess,
+    ParameterOptions, ParameterPlan, PollCycle, PollStep, TRIP_CODE_UNKNOWN)
 from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
+from drive_bridge.protocol.commands import Command
+from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.protocol.words import bit, bits
 
 FAMILY = 'mcd'
@@ -51,12 +54,12 @@ LAST_STATUS_NUMBER = 40008  # a read across 40008/40009 gives error 05 (section 
 MAX_READ_REGISTERS = 125  # section 8: "up to a maximum of 125 register blocks"
 
 # Section 6, register 40002: command values.
-COMMAND_VALUES: Dict[str, int] = {
-    'start': 1,
-    'stop': 2,
-    'reset': 3,
-    'quick_stop': 4,  # coast to stop
-    'forced_comms_trip': 5,
+COMMAND_VALUES: Dict[Command, int] = {
+    Command.START: 1,
+    Command.STOP: 2,
+    Command.RESET: 3,
+    Command.QUICK_STOP: 4,  # coast to stop
+    Command.FORCED_COMMS_TRIP: 5,
 }
 
 # Section 6, register 40003 bits 0-3: starter state -> the ROS contract's state names.
@@ -219,28 +222,36 @@ def resolve_model(configured: str, product_word: int) -> str:
     return configured
 
 
-class McdProfile:
+class McdProfile(DeviceProfile, ParameterAccess):
     """Register map, decode and commands of one MCD starter on Modbus RTU."""
 
     family = FAMILY
+    commands = frozenset(COMMAND_VALUES)
 
     def __init__(self, model: str = 'auto', current_scale: float = 1.0):
         if model not in MODELS:
             raise ConfigError(f'unknown MCD model {model!r}: allowed {", ".join(MODELS)}')
-        self.configured_model = model
-        self.model: Optional[str] = None if model == 'auto' else model
+        super().__init__(model)
         self.current_scale = current_scale
 
     @property
     def features(self) -> ModelFeatures:
         """Return the features of the resolved (or configured) model."""
-        return MODEL_FEATURES[self.model or 'mcd202']
+        return MODEL_FEATURES[self.resolved_model or 'mcd202']
 
-    def poll_plan(self) -> List[ReadRegisters]:
-        """Return the reads of one poll: 40003-40008 in one transaction, never past 40008."""
+    @property
+    def reading_fields(self) -> FrozenSet[str]:
+        """Return current and temperature unless the model is an MCD 201."""
+        if self.resolved_model == 'mcd201':
+            return frozenset()
+        return frozenset({'motor_current', 'motor_temperature'})
+
+    def poll(self, control: ControlView) -> PollCycle:
+        """Read 40003-40008 in one transaction (never past 40008) and decode them."""
         first = REGISTER['starter_status']
-        count = LAST_STATUS_NUMBER - first.number + 1
-        return [ReadRegisters(first.address, count)]
+        registers = yield PollStep(ReadRegisters(first.address,
+                                                 LAST_STATUS_NUMBER - first.number + 1))
+        return self.decode([registers])
 
     def decode(self, blocks: List[List[int]]) -> DeviceReading:
         """Decode the registers of one poll (40003-40008) into a reading."""
@@ -248,45 +259,31 @@ class McdProfile:
         if len(registers) != 6:
             raise ProtocolError(f'expected 6 registers 40003-40008, got {len(registers)}')
         status_word, trip_raw, current_raw, temperature_raw, product_word, protocol = registers
-        self.model = resolve_model(self.configured_model, product_word)
+        self.resolved_model = resolve_model(self.configured_model, product_word)
         features = self.features
-        state_code = bits(status_word, 0, 3)
-        state = STATE_CODES.get(state_code, 'unknown')
         trip_code = 0 if trip_raw == NO_TRIP else trip_raw
-        product_type, list_version = decode_product_word(product_word)
-        reading = DeviceReading(
-            state=state, status_word=status_word, trip_code=trip_code,
-            trip_name=trip_name(trip_code, features.name))
+        reading = starter_reading(features, status_word, trip_code,
+                                  trip_name(trip_code, features.name), 'in 40003')
         if features.has_current:
             reading.motor_current_a = float(current_raw) * self.current_scale
         if features.has_temperature:
             reading.motor_temperature_pct = float(temperature_raw)
-        reading.details = {
-            'model': features.name,
-            'state_code': str(state_code),
-            'initialised': str(bit(status_word, STATUS_BIT_INITIALISED)),
-            'current_above_flc': str(bit(status_word, STATUS_BIT_CURRENT_ABOVE_FLC)),
+        product_type, list_version = decode_product_word(product_word)
+        reading.details.update({
             'positive_phase_sequence': str(bit(status_word, STATUS_BIT_PHASE_SEQUENCE)),
             'trip_code_register': str(trip_raw),
             'product_type': PRODUCT_TYPES.get(product_type, str(product_type)),
             'parameter_list_version': str(list_version),
             'serial_protocol_version': str(protocol),
-        }
-        if state == 'unknown':
-            reading.warnings.append(f'unknown state code {state_code} in 40003')
-        if bit(status_word, STATUS_BIT_CURRENT_ABOVE_FLC) and \
-                STATUS_BIT_CURRENT_ABOVE_FLC in features.status_bits:
-            reading.warnings.append('motor current exceeds FLC')
-        if state == 'tripped':
-            reading.fault = f'tripped: {reading.trip_name or "no trip code"}'
+        })
         return reading
 
-    def command_plan(self, command: str) -> CommandPlan:
+    def command_plan(self, command: Command, control: ControlView) -> CommandPlan:
         """Return the write that carries out ``command`` (register 40002)."""
         value = COMMAND_VALUES.get(command)
         if value is None:
-            allowed = ', '.join(name for name in COMMAND_VALUES if name != 'forced_comms_trip')
-            raise CommandRefused(f'MCD starters have no {command} command (allowed: {allowed})')
+            raise CommandRefused(f'MCD starters have no {command.value} command (allowed: '
+                                 f'{", ".join(sorted(c.value for c in COMMAND_VALUES))})')
         return CommandPlan(command, (WriteRegister(REGISTER['command'].address, value),))
 
     def parameter_address(self, number: int) -> int:
@@ -301,8 +298,13 @@ class McdProfile:
                 f'parameter {number} is out of range for {self.features.name}: 1-{maximum}')
         return FIRST_PARAMETER_NUMBER + number - 1 - 40001
 
-    def parameter_plan(self, number: int, value: Optional[int] = None) -> ParameterPlan:
+    def parameter_plan(self, number: int, value: Any = None,
+                       options: ParameterOptions = ParameterOptions()) -> ParameterPlan:
         """Return the read (value None) or write of parameter ``number`` (16-bit raw)."""
+        if options.data_type not in (None, 'uint16') or options.conversion not in (None, 0) \
+                or options.index is not None or options.eeprom:
+            raise CommandRefused('MCD parameters are raw 16-bit registers: data type, '
+                                 'conversion, index and EEPROM options do not apply')
         address = self.parameter_address(number)
         if value is None:
             return ParameterPlan(f'parameter {number} read', (ReadRegisters(address, 1),),
@@ -312,6 +314,66 @@ class McdProfile:
         return ParameterPlan(f'parameter {number} write', (WriteRegister(address, value),),
                              lambda results: f'parameter {number} = {value} acknowledged')
 
+    def parameter_numbers(self) -> Sequence[int]:
+        """Return every parameter number of the model (1 to its last)."""
+        return range(1, self.features.max_parameter + 1)
+
     def explain_exception(self, code: int, detail: Optional[int] = None) -> str:
         """Return technician text for a Modbus exception code from the module."""
         return module_error_text(code)
+
+
+def starter_reading(features: ModelFeatures, status_word: int, trip_code: int,
+                    trip_text: str, where: str) -> DeviceReading:
+    """
+    Return the reading of an MCD status word, the same over Modbus (40003) and AP ASCII (C22).
+
+    ``trip_code`` is already the contract's (0 = no trip); ``where`` names the source of the
+    status for the warning about an unknown state code.
+    """
+    state_code = bits(status_word, 0, 3)
+    state = STATE_CODES.get(state_code, 'unknown')
+    reading = DeviceReading(state=state, status_word=status_word, trip_code=trip_code,
+                            trip_name=trip_text)
+    reading.details = {
+        'model': features.name,
+        'state_code': str(state_code),
+        'initialised': str(bit(status_word, STATUS_BIT_INITIALISED)),
+        'current_above_flc': str(bit(status_word, STATUS_BIT_CURRENT_ABOVE_FLC)),
+    }
+    if state == 'unknown':
+        reading.warnings.append(f'unknown state code {state_code} {where}')
+    if bit(status_word, STATUS_BIT_CURRENT_ABOVE_FLC) and \
+            STATUS_BIT_CURRENT_ABOVE_FLC in features.status_bits:
+        reading.warnings.append('motor current exceeds FLC')
+    if state == 'tripped':
+        if not trip_code:
+            reading.trip_code = TRIP_CODE_UNKNOWN
+            reading.trip_name = reading.trip_name or 'tripped (no trip code reported)'
+        reading.fault = f'tripped: {reading.trip_name}'
+    return reading
+
+
+def make_profile(model: str, protocol: str, options: Mapping[str, Any]) -> McdProfile:
+    """Return the profile of an MCD starter on ``protocol`` (Modbus or AP ASCII)."""
+    scale = options.get('current_scale', 1.0)
+    if protocol == 'ap_ascii':
+        from drive_bridge.devices.mcd_ascii import McdAsciiProfile
+        return McdAsciiProfile(model, scale)
+    return McdProfile(model, scale)
+
+
+def make_simulator(model: str, now_s: float, **settings: Any) -> Any:
+    """Return a simulated MCD starter of ``model`` with its Modbus Module face."""
+    from drive_bridge.sim.mcd_device import McdSimDevice
+    from drive_bridge.sim.mcd_model import McdModel, McdSimConfig
+    return McdSimDevice(McdModel(McdSimConfig(model=model, **settings), now_s))
+
+
+ENTRY = Family(
+    name=FAMILY,
+    description='MCD 201/202/500 via the MCD Modbus Module, MCD 3000 via the Remote Operator',
+    models=MODELS, address_range=ADDRESS_RANGE,
+    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'ap_ascii'), settings=(),
+    make_profile=make_profile, sim_models=tuple(MODEL_FEATURES),
+    make_simulator=make_simulator)

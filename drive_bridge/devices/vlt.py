@@ -9,8 +9,11 @@ process data, control and status words are the FC profile's (:mod:`drive_bridge.
 
 from typing import Dict, Optional
 
-from drive_bridge.devices.drive import DriveFamilyData
+from drive_bridge.devices.contracts import Family
+from drive_bridge.devices.drive import (
+    COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile, make_drive_simulator)
 from drive_bridge.devices.parameters import ParameterSpec, TEXT, VLT_CONVERSION_FACTORS
+from drive_bridge.settings import Setting
 
 FAMILY = 'vlt'
 # The option card cannot report which drive it sits in: the model must be configured.
@@ -90,3 +93,16 @@ DATA = DriveFamilyData(
     timeout_register=REGISTER_MODBUS_TIMEOUT, drive_link_timeout_register=REGISTER_DRIVE_TIMEOUT,
     text_read_index=TEXT_READ_INDEX, text_write_index=TEXT_WRITE_INDEX,
     is_setting=lambda number: not 500 <= number < 600 and number != 953)  # 5xx: readouts
+
+DRIVE_LINK_TIMEOUT = Setting(
+    'drive_link_timeout', float, 0.0,
+    "VLT option card: register 3, the card's drive communications timeout in seconds, "
+    'written when the drive comes online; 0 = leave it', low=0.0, high=655.35)
+
+ENTRY = Family(
+    name=FAMILY, description='VLT 5000 / VLT 6000 HVAC with the Modbus RTU option card',
+    models=MODELS, address_range=ADDRESS_RANGE,
+    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'),
+    settings=(COMMS_TIMEOUT, DRIVE_LINK_TIMEOUT, CURRENT_PARAMETER),
+    make_profile=make_drive_profile(DATA), sim_models=MODELS,
+    make_simulator=make_drive_simulator, reference=True)

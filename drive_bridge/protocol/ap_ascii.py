@@ -15,6 +15,8 @@ an unknown address never answers.
 from dataclasses import dataclass
 from typing import Optional
 
+from drive_bridge.protocol.commands import Command
+
 STX, ETX, EOT, ENQ, ACK, NAK, BEL = 0x02, 0x03, 0x04, 0x05, 0x06, 0x15, 0x07
 SINGLE_BYTE_REPLIES = {ACK: 'ACK', NAK: 'NAK', BEL: 'BEL'}
 FRAME_BYTES = 8  # STX d d d d lrc lrc ETX
@@ -22,8 +24,8 @@ ADDRESS_RANGE = (1, 99)  # two decimal digits
 MIN_TIMEOUT_S = 0.25  # the MCD 3000 may take up to 250 ms to answer (protocols.md)
 
 # Section 10.1: commands.
-COMMANDS = {'start': 'B10', 'stop': 'B12', 'reset': 'B14', 'quick_stop': 'B16',
-            'forced_comms_trip': 'B18'}
+COMMANDS = {Command.START: 'B10', Command.STOP: 'B12', Command.RESET: 'B14',
+            Command.QUICK_STOP: 'B16', Command.FORCED_COMMS_TRIP: 'B18'}
 # Sections 10.2 and 10.3: requests and what their reply carries.
 REQUESTS = {'trip_code': ('C18', 'status'), 'status': ('C22', 'status'),
             'motor_current': ('D10', 'data'), 'motor_temperature': ('D12', 'data')}

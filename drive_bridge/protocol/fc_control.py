@@ -10,6 +10,7 @@ The manuals' frames give the two anchor words: start 0x047C and ramp stop 0x043C
 from dataclasses import dataclass
 from typing import Dict, Optional
 
+from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.words import bit
 
 # Control word bits (section 5.6.1): for bits 2-5 a 0 *requests* the stop or the freeze.
@@ -31,13 +32,12 @@ START_WORD = RAMP_STOP_WORD | (1 << CTW_START)  # 0x047C, manual frame "start at
 # The stop commands of the ROS contract, strongest first (option card manual: "The
 # precedence of the stop commands is as follows: 1. Coast stop 2. Quick stop 3. DC Brake
 # 4. Normal (Ramp) stop").
-COMMAND_WORDS: Dict[str, int] = {
-    'start': START_WORD,
-    'stop': RAMP_STOP_WORD,
-    'quick_stop': RAMP_STOP_WORD & ~(1 << CTW_QUICK_STOP_OFF),  # 0x042C
-    'coast_stop': RAMP_STOP_WORD & ~(1 << CTW_COAST_OFF),  # 0x0434
+COMMAND_WORDS: Dict[Command, int] = {
+    Command.START: START_WORD,
+    Command.STOP: RAMP_STOP_WORD,
+    Command.QUICK_STOP: RAMP_STOP_WORD & ~(1 << CTW_QUICK_STOP_OFF),  # 0x042C
+    Command.COAST_STOP: RAMP_STOP_WORD & ~(1 << CTW_COAST_OFF),  # 0x0434
 }
-STOP_COMMANDS = ('stop', 'quick_stop', 'coast_stop')
 
 
 def with_reset(control_word: int) -> int:

@@ -3,42 +3,61 @@ The ROS 2 node ``drive_bridge``: one bus, several devices, the contract's topics
 
 A managed (lifecycle) node: *configure* validates the parameters, opens the bus and starts
 reading (``/diagnostics`` is published from then on); *activate* enables the device topics,
-the command services and the speed references; *deactivate* stops the motors this node
-started and refuses commands again; *cleanup* closes the port. With ``autostart`` (default)
-the node walks itself to active, so ``drive_bridge_node`` just works.
+the commands and the speed references; *deactivate* stops every motor that may run because
+of this node and refuses commands again (a stop is still taken while a motor may run);
+*cleanup* closes the port. With ``autostart`` (default) the node walks itself to active, so
+``drive_bridge_node`` just works.
 
-Bus I/O never runs in a ROS callback: the bus thread reports readings through a queue and
-a guard condition (published by the executor), and service callbacks only queue a command
-and wait for its outcome on a future, in their own callback group.
+Bus I/O never runs in a ROS callback, and no callback waits for the bus while holding the
+executor: the bus thread publishes each reading as it is decoded, and the command services
+are coroutines that await the bus's answer (the executor serves topics and timers
+meanwhile). SIGINT, SIGTERM and SIGHUP are taken by the main thread (:func:`main`): the
+first one stops every motor that may run because of the node, then the node exits; more
+signals meanwhile change nothing.
 """
 
-import queue
+import functools
+import signal
 import sys
+import threading
+import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from drive_bridge import config as cfg
-from drive_bridge.bus.master import BusEvent, BusMaster, DeviceSnapshot
+from drive_bridge.bus.master import BusEvent, BusMaster
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError
+from drive_bridge.protocol.commands import Command
+from drive_bridge.ros.diagnostics import diagnostic_status, status_name
+from drive_bridge.ros.publishers import DevicePublishers
+from drive_bridge.settings import check_value, Setting
+from drive_bridge.transport.protocols import PROTOCOLS
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 import rclpy
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Float32, String, UInt16, UInt32
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future as RosFuture
+from std_msgs.msg import Float32
 from std_srvs.srv import Trigger
 
 NODE_NAME = 'drive_bridge'
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                     reliability=ReliabilityPolicy.RELIABLE)
-SERVICE_COMMANDS = ('start', 'stop', 'quick_stop', 'reset')
-DRIVE_SERVICE_COMMANDS = SERVICE_COMMANDS + ('coast_stop',)
-SHUTDOWN_STOP_TIMEOUT_S = 3.0
+SERVICE_COMMANDS = (Command.START, Command.STOP, Command.QUICK_STOP, Command.COAST_STOP,
+                    Command.RESET)
+STOP_ALL_TIMEOUT_S = 3.0
+NODE_SETTINGS: Tuple[Setting, ...] = (
+    Setting('autostart', bool, True,
+            'walk the lifecycle to active at start (false: wait for configure and activate)'),
+    Setting('allow_runtime_control_enable', bool, True,
+            'false: allow_control cannot be switched on with ros2 param set (a site can '
+            'forbid other processes to enable control)'),
+)
+EXIT_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
-def _descriptor(setting: cfg.Setting, label: str) -> ParameterDescriptor:
+def _descriptor(setting: Setting, label: str) -> ParameterDescriptor:
     descriptor = ParameterDescriptor(
         name=label, description=f'{setting.description}; allowed {setting.allowed()}',
         read_only=not setting.runtime, dynamic_typing=True)
@@ -51,66 +70,41 @@ def _descriptor(setting: cfg.Setting, label: str) -> ParameterDescriptor:
     return descriptor
 
 
-class _DevicePublishers:
-    """The publishers of one device and what was last published on latched topics."""
+class _PendingCall:
+    """A service call waiting for the bus: the bus's future and the one the service awaits."""
 
-    def __init__(self, node: LifecycleNode, name: str, is_drive: bool):
-        publisher = node.create_lifecycle_publisher  # silent unless the node is active
-        self.all = []
-        self.state = publisher(String, f'{name}/state', LATCHED)
-        self.trip = publisher(String, f'{name}/trip', LATCHED)
-        self.status_word = publisher(UInt16, f'{name}/status_word', 10)
-        self.motor_current = publisher(Float32, f'{name}/motor_current', 10)
-        self.trip_code = publisher(UInt16, f'{name}/trip_code', 10)
-        self.motor_temperature = publisher(Float32, f'{name}/motor_temperature', 10)
-        self.all = [self.state, self.trip, self.status_word, self.motor_current,
-                    self.trip_code, self.motor_temperature]
-        self.speed_feedback = self.alarm_word = self.warning_word = None
-        if is_drive:
-            self.speed_feedback = publisher(Float32, f'{name}/speed_feedback', 10)
-            self.alarm_word = publisher(UInt32, f'{name}/alarm_word', 10)
-            self.warning_word = publisher(UInt32, f'{name}/warning_word', 10)
-            self.all += [self.speed_feedback, self.alarm_word, self.warning_word]
-        self.last_state: Optional[str] = None
-        self.last_trip: Optional[str] = None
-
-    def forget_latched(self) -> None:
-        """Forget what the latched topics carry, so the next values go out (activation)."""
-        self.last_state = self.last_trip = None
-
-    def publish_state(self, state: str) -> None:
-        if state != self.last_state:
-            self.last_state = state
-            self.state.publish(String(data=state))
-
-    def publish_trip(self, trip: str) -> None:
-        if trip != self.last_trip:
-            self.last_trip = trip
-            self.trip.publish(String(data=trip))
+    def __init__(self, bus_future, label: str, give_up_at_s: float):
+        self.bus_future = bus_future
+        self.label = label
+        self.give_up_at_s = give_up_at_s
+        self.ros_future = RosFuture()
 
 
 class DriveBridgeNode(LifecycleNode):
-    """One bus owner; see the module docstring and docs in README.md."""
+    """One bus owner; see the module docstring and the README."""
 
     def __init__(self, **kwargs: Any):
         super().__init__(NODE_NAME, **kwargs)
         self._guard_change_state()
-        self.autostart = bool(self.declare_parameter(
-            'autostart', True, ParameterDescriptor(
-                name='autostart', read_only=True,
-                description='walk the lifecycle to active at start (false: wait for '
-                            'configure and activate)')).value)
+        node_values = {setting.name: self._declare(setting, setting.name)
+                       for setting in NODE_SETTINGS}
+        self.autostart = bool(node_values['autostart'])
+        self.allow_runtime_control_enable = bool(node_values['allow_runtime_control_enable'])
         self.config: Optional[cfg.BridgeConfig] = None
         self.config_error = ''
         self._autostarting = False
         self.bus: Optional[BusMaster] = None
         self.active = False
-        self._events: 'queue.SimpleQueue[BusEvent]' = queue.SimpleQueue()
-        self._device_publishers: Dict[str, _DevicePublishers] = {}
+        self._device_publishers: Dict[str, DevicePublishers] = {}
         self._entities: List[Tuple[Callable[[Any], bool], Any]] = []  # (destroy, entity)
-        self._service_group = ReentrantCallbackGroup()
-        self._timer_group = MutuallyExclusiveCallbackGroup()
-        self._guard = self.create_guard_condition(self._publish_events)
+        self._publishing = threading.Lock()
+        self._pending: List[_PendingCall] = []
+        self._pending_lock = threading.Lock()
+        # Service coroutines stay "executing" while they await the bus: they and the guard
+        # that hands them the bus's answers must not share a mutually exclusive group.
+        self._calls = ReentrantCallbackGroup()
+        self._answers = self.create_guard_condition(self._deliver_answers,
+                                                    callback_group=self._calls)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -150,201 +144,290 @@ class DriveBridgeNode(LifecycleNode):
                 self.get_logger().error(f'configuration error: {error}')
             return TransitionCallbackReturn.FAILURE
         self.config_error = ''
-        specs = [device.make_spec() for device in self.config.devices]
-        self.bus = BusMaster(self.config.make_transport(), specs, self.config.timing,
-                             listener=self._on_bus_event)
+        self.bus = BusMaster(self.config.make_transport(),
+                             [device.make_spec() for device in self.config.devices],
+                             self.config.timing, listener=self._on_bus_event)
+        self.bus.set_commands_enabled(False)
         for device in self.config.devices:
-            self._create_device_interface(device.name, device.is_drive)
+            self._create_device_interface(device.name)
         self._entities.append((self.destroy_timer, self.create_timer(
-            self.config.diagnostics_period_s, self._publish_diagnostics,
-            callback_group=self._timer_group)))
+            self.config.diagnostics_period_s, self._on_diagnostics_timer)))
         self.bus.start()
         self.get_logger().info(
             f'bus {self.config.link.describe()}: '
-            + ', '.join(f'{d.name} ({d.family} {d.model} @ {d.address})'
+            + ', '.join(f'{d.name} ({d.family} {d.model} @ {d.address}'
+                        + ('' if d.allow_control else ', monitor only') + ')'
                         for d in self.config.devices))
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Enable the device topics, the command services and the speed references."""
+        """Enable the device topics, the commands and the speed references."""
         result = super().on_activate(state)
         self.active = True
+        self.bus.set_commands_enabled(True)
         for name, publishers in self._device_publishers.items():
             publishers.forget_latched()
             snapshot = self.bus.snapshot(name)
             if snapshot.reading is not None:
-                self._publish_reading(publishers, snapshot.reading)
+                publishers.publish_reading(snapshot.reading)
             else:
                 publishers.publish_state('offline' if snapshot.online is False else 'unknown')
         self.get_logger().info('active: commands enabled')
         return result
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Refuse commands again and stop the motors this node started."""
+        """Refuse commands again and stop every motor that may run because of this node."""
         self.active = False
-        self._report_stops(self.bus.stop_started_motors(SHUTDOWN_STOP_TIMEOUT_S), 'deactivate')
+        self._report_stops(self.bus.stop_all('deactivate', STOP_ALL_TIMEOUT_S), 'deactivate')
+        self.get_logger().info('inactive: commands refused (a stop is still taken while a '
+                               'motor may run because of this node)')
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Close the bus and remove the device interface."""
-        self._close_bus(stop_motors=False)
+        """Close the bus (stopping what may still run) and remove the device interface."""
+        self._close_bus()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop the motors this node started, then close the bus."""
-        self._close_bus(stop_motors=True)
+        """Stop every motor that may run because of this node, then close the bus."""
+        self._close_bus()
         return TransitionCallbackReturn.SUCCESS
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop what this node started and close the bus; back to unconfigured."""
-        self._close_bus(stop_motors=True)
+        """Stop what may run because of this node and close the bus; back to unconfigured."""
+        self._close_bus()
         return TransitionCallbackReturn.SUCCESS
 
-    def _close_bus(self, stop_motors: bool) -> None:
+    def _close_bus(self) -> None:
         self.active = False
-        if self.bus is not None:
-            self._report_stops(self.bus.shutdown(stop_motors=stop_motors,
-                                                 timeout_s=SHUTDOWN_STOP_TIMEOUT_S), 'shutdown')
-            self.bus = None
+        bus, self.bus = self.bus, None
+        if bus is not None:
+            self._report_stops(bus.shutdown(stop_motors=True, timeout_s=STOP_ALL_TIMEOUT_S),
+                               'shutdown')
+        with self._publishing:  # the bus thread has ended: nothing publishes any more
+            for publishers in self._device_publishers.values():
+                publishers.destroy()
+            self._device_publishers.clear()
         for destroy, entity in self._entities:
             destroy(entity)
-        for publishers in self._device_publishers.values():
-            for publisher in publishers.all:
-                self.destroy_lifecycle_publisher(publisher)
         self._entities.clear()
-        self._device_publishers.clear()
+        self._answer_pending('the bus was closed')
 
-    @staticmethod
-    def _report_stops(outcomes: List[str], when: str) -> None:
+    def _report_stops(self, outcomes: List[str], when: str) -> None:
+        logger = self.get_logger()
         for outcome in outcomes:
-            print(f'[drive_bridge] {when}: {outcome}', file=sys.stderr, flush=True)
+            if 'acknowledged' in outcome:
+                logger.info(f'{when}: {outcome}')
+            else:
+                logger.error(f'{when}: {outcome}')
+
+    def shutdown_bus(self) -> None:
+        """Stop every motor that may run because of this node, then close the bus."""
+        self._close_bus()
 
     # -- configuration ------------------------------------------------------------------
     def _load_config(self) -> cfg.BridgeConfig:
-        bus_values = {setting.name: self._declare(setting, setting.name)
-                      for setting in cfg.BUS_SETTINGS}
+        protocol = self._declare(cfg.BUS_SETTINGS[0], 'protocol')
+        own = PROTOCOLS[protocol].settings if protocol in PROTOCOLS else ()
+        protocol_names = {setting.name for spec in PROTOCOLS.values()
+                          for setting in spec.settings}
+        bus_values = {'protocol': protocol}
+        for setting in cfg.BUS_SETTINGS[1:]:
+            if setting.name not in protocol_names or setting in own:
+                bus_values[setting.name] = self._declare(setting, setting.name)
         names = bus_values.get('devices') or []
         if not isinstance(names, list):
-            names = []
-        device_values = {}
-        for name in names:
-            if not isinstance(name, str) or not cfg.DEVICE_NAME.match(name):
-                continue
-            family = self._declare(cfg.DEVICE_SETTING['family'], f'{name}.family')
-            device_values[name] = {
-                setting.name: self._declare(setting, f'{name}.{setting.name}')
-                for setting in cfg.device_settings(family) if setting.name != 'family'}
-            device_values[name]['family'] = family
-        self._check_unknown_overrides(names)
+            raise ConfigError(f"parameter 'devices' = {names!r} has the wrong type: give a "
+                              'list of device names')
+        cfg.check_device_names(names)
+        device_values = {name: self._declare_device(name) for name in names}
+        self._check_unknown_overrides(names, protocol)
         return cfg.build_config(bus_values, device_values)
 
-    def _declare(self, setting: cfg.Setting, label: str) -> Any:
+    def _declare_device(self, name: str) -> Dict[str, Any]:
+        family_name = self._declare(cfg.COMMON_DEVICE_SETTINGS[0], f'{name}.family')
+        check_value(cfg.COMMON_DEVICE_SETTINGS[0], family_name, f'{name}.family')
+        family = cfg.FAMILIES[family_name]
+        values = {'family': family_name}
+        for setting in cfg.device_settings(family)[1:]:
+            values[setting.name] = self._declare(setting, f'{name}.{setting.name}')
+        return values
+
+    def _declare(self, setting: Setting, label: str) -> Any:
+        """Declare (once) and return a parameter; a value rclpy refuses gets our reason."""
         if self.has_parameter(label):  # configured before, cleaned up since
-            parameter = self.get_parameter(label)
+            value = self.get_parameter(label).value
         else:
-            parameter = self.declare_parameter(label, setting.default,
-                                               _descriptor(setting, label))
-        value = parameter.value
+            try:
+                value = self.declare_parameter(label, setting.default,
+                                               _descriptor(setting, label)).value
+            except Exception:  # noqa: B902 - rclpy's range errors: say it our way
+                override = (getattr(self, '_parameter_overrides', {}) or {}).get(label)
+                check_value(setting, getattr(override, 'value', None), label)
+                raise ConfigError(f'parameter {label!r} is refused: allowed '
+                                  f'{setting.allowed()}') from None
         return list(value) if isinstance(value, (list, tuple)) else value
 
-    def _check_unknown_overrides(self, names: List[str]) -> None:
+    def _check_unknown_overrides(self, names: List[str], protocol: str) -> None:
         overrides = getattr(self, '_parameter_overrides', {}) or {}
         for key in overrides:
             if self.has_parameter(key) or key.startswith('qos_overrides.'):
                 continue
             device, _, setting = key.partition('.')
-            if device in names and setting in cfg.DEVICE_SETTING and \
-                    cfg.DEVICE_SETTING[setting].families:
-                raise ConfigError(f'parameter {key!r} applies to families '
-                                  f'{", ".join(cfg.DEVICE_SETTING[setting].families)} only')
-            known = ', '.join(s.name for s in cfg.DEVICE_SETTINGS) if device in names \
-                else ', '.join(s.name for s in cfg.BUS_SETTINGS)
-            raise ConfigError(f'unknown parameter {key!r} in the parameters: known are '
-                              f'{known} (device blocks must be listed in devices)')
+            if device in names and setting:
+                owners = cfg.families_taking(setting)
+                if owners:
+                    raise ConfigError(f'parameter {key!r} applies to families '
+                                      f'{", ".join(owners)} only')
+                family = self.get_parameter(f'{device}.family').value
+                known = [s.name for s in cfg.device_settings(cfg.FAMILIES[family])]
+                raise ConfigError(f'unknown parameter {key!r}: a {family} device takes '
+                                  f'{", ".join(known)}')
+            for name, spec in PROTOCOLS.items():
+                if any(s.name == key for s in spec.settings):
+                    raise ConfigError(f'parameter {key!r} applies to protocol {name} only, '
+                                      f'not {protocol}')
+            if '.' in key:
+                raise ConfigError(f'parameter {key!r}: {device!r} is not a listed device '
+                                  f'(devices: {", ".join(names)})')
+            known = ', '.join(s.name for s in cfg.BUS_SETTINGS + NODE_SETTINGS)
+            raise ConfigError(f'unknown parameter {key!r}: known bus parameters are {known}')
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        if self.bus is None:  # declaring at configure: build_config validates them
+        """Check every change first, then apply them all at once on the bus, or none."""
+        bus = self.bus
+        if bus is None:  # declaring at configure: build_config validates them
             return SetParametersResult(successful=True)
-        for parameter in parameters:
-            device, _, setting_name = parameter.name.partition('.')
-            setting = cfg.DEVICE_SETTING.get(setting_name)
-            if device not in self.bus.device_names or setting is None:
-                continue
-            try:
-                value = cfg.check_value(setting, parameter.value, parameter.name)
-            except ConfigError as error:
-                return SetParametersResult(successful=False, reason=str(error))
-            if setting_name == 'speed_reference':
-                try:
-                    self.bus.set_speed_reference(device, value)
-                except CommandRefused as error:
-                    return SetParametersResult(successful=False, reason=str(error))
-            elif setting_name == 'reference_timeout':
-                self.bus.set_reference_timeout(device, value)
-            elif setting_name == 'allow_control':
-                self.bus.set_allow_control(device, value)
-            elif setting_name == 'poll_rate':
-                self.bus.set_poll_rate(device, value)
-            elif setting_name == 'stop_on_shutdown':
-                self.bus.set_stop_on_shutdown(device, value)
+        settings = cfg.all_device_settings()
+        changes: Dict[str, Dict[str, Any]] = {}
+        try:
+            for parameter in parameters:
+                device, _, name = parameter.name.partition('.')
+                setting = settings.get(name)
+                if device not in bus.device_names or setting is None or not setting.runtime:
+                    continue
+                value = check_value(setting, parameter.value, parameter.name)
+                if name == 'allow_control' and value and not \
+                        bus.snapshot(device).allow_control and \
+                        not self.allow_runtime_control_enable:
+                    raise ConfigError(
+                        f'{parameter.name} cannot be switched on at runtime here '
+                        '(allow_runtime_control_enable is false): restart the node with it '
+                        'in the parameters file')
+                changes.setdefault(device, {})[name] = value
+            enabling = [device for device, change in changes.items()
+                        if change.get('allow_control') and not bus.snapshot(device).allow_control]
+            bus.apply_settings(changes)
+        except (ConfigError, CommandRefused) as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        for device in enabling:
+            self.get_logger().warning(f'{device}: control ENABLED at runtime (allow_control '
+                                      'set true): commands and writes are taken from now on')
         return SetParametersResult(successful=True)
 
     # -- interface ----------------------------------------------------------------------
-    def _create_device_interface(self, name: str, is_drive: bool) -> None:
-        publishers = _DevicePublishers(self, name, is_drive)
+    def _create_device_interface(self, name: str) -> None:
+        snapshot = self.bus.snapshot(name)
+        publishers = DevicePublishers(self, name, snapshot.reading_fields)
         publishers.publish_state('unknown')
-        self._device_publishers[name] = publishers
-        if is_drive:
+        with self._publishing:
+            self._device_publishers[name] = publishers
+        if cfg.FAMILIES[snapshot.family].reference:
             self._entities.append((self.destroy_subscription, self.create_subscription(
                 Float32, f'{name}/speed_reference',
-                lambda message, n=name: self._on_speed_reference(n, message), 10,
-                callback_group=self._timer_group)))
-        for command in DRIVE_SERVICE_COMMANDS if is_drive else SERVICE_COMMANDS:
-            self._entities.append((self.destroy_service, self.create_service(
-                Trigger, f'{name}/{command}',
-                lambda request, response, c=command, n=name: self._on_trigger(n, c, response),
-                callback_group=self._service_group)))
+                lambda message, n=name: self._on_speed_reference(n, message), 10)))
+        for command in SERVICE_COMMANDS:
+            if command in snapshot.commands:
+                self._entities.append((self.destroy_service, self.create_service(
+                    Trigger, f'{name}/{command.value}',
+                    functools.partial(self._on_trigger, name, command),
+                    callback_group=self._calls)))
 
     def _inactive_reason(self) -> str:
-        """Return why commands are refused now, or '' when the node is active."""
-        if self.active and self.bus is not None:
-            return ''
         label = self._state_machine.current_state[1]
         return f'node is {label} (lifecycle): activate it first; nothing sent'
 
-    def _on_trigger(self, name: str, command: str, response: Trigger.Response):
-        inactive = self._inactive_reason()
-        if inactive:
-            response.success, response.message = False, inactive
-            self.get_logger().warning(f'{name}/{command}: {inactive}')
-            return response
+    async def _on_trigger(self, name: str, command: Command, request: Trigger.Request,
+                          response: Trigger.Response):
+        """Send ``command`` and answer once the device acknowledged it or it failed."""
         try:
-            future = self.bus.submit_command(name, command)
-            message = future.result(timeout=self.config.timing.command_timeout_s
-                                    + self.config.link.timeout_s)
-            response.success, response.message = True, str(message)
+            response.message = await self._command(name, command)
+            response.success = True
         except DriveBridgeError as error:
             response.success, response.message = False, str(error)
-        except TimeoutError:
-            response.success = False
-            response.message = f'{command} not confirmed: the bus did not answer in time'
         except Exception as error:  # noqa: B902 - a bug must not kill the node
             response.success = False
-            response.message = f'{command} failed: internal error {type(error).__name__}: {error}'
-        if response.success:
-            self.get_logger().info(f'{name}/{command}: {response.message}')
+            response.message = f'{command.value} failed: internal error ' \
+                f'{type(error).__name__}: {error}'
+        if response.success:  # one logging call site per severity (rclpy caches them)
+            self.get_logger().info(f'{name}/{command.value}: {response.message}')
         else:
-            self.get_logger().warning(f'{name}/{command}: {response.message}')
+            self.get_logger().warning(f'{name}/{command.value}: {response.message}')
         return response
 
+    async def _command(self, name: str, command: Command) -> str:
+        bus = self.bus
+        if bus is None or (not self.active and not command.stops):
+            raise CommandRefused(self._inactive_reason())
+        future = bus.submit_command(name, command)
+        if future.done() and future.exception() is not None and not self.active:
+            raise CommandRefused(f'{self._inactive_reason()} ({future.exception()})')
+        give_up_s = self.config.timing.command_deadline_s + \
+            4 * self.config.link.timeout_s + 1.0
+        call = _PendingCall(future, command.value, time.monotonic() + give_up_s)
+        with self._pending_lock:
+            self._pending.append(call)
+        future.add_done_callback(lambda done: self._answers.trigger())
+        if future.done():
+            self._answers.trigger()
+        result = await call.ros_future
+        if isinstance(result, BaseException):
+            raise result
+        return result
+
+    def _deliver_answers(self) -> None:
+        """Hand the bus's answers to the waiting services (executor thread)."""
+        now = time.monotonic()
+        with self._pending_lock:
+            pending, self._pending = self._pending, []
+        for call in pending:
+            if call.bus_future.done():
+                error = call.bus_future.exception()
+                call.ros_future.set_result(error if error is not None
+                                           else call.bus_future.result())
+            elif now > call.give_up_at_s:
+                self._give_up(call)
+            else:
+                with self._pending_lock:
+                    self._pending.append(call)
+
+    @staticmethod
+    def _give_up(call: _PendingCall) -> None:
+        """Answer a call the bus did not resolve in time; a command not yet sent never is."""
+        if call.bus_future.cancel():
+            call.ros_future.set_result(CommandRefused(
+                f'{call.label} not sent: the bus did not take it in time; it is never sent'))
+        else:
+            call.ros_future.set_result(DriveBridgeError(
+                f'{call.label} not confirmed: the bus did not answer in time; it may be on '
+                'the wire (see /diagnostics)'))
+
+    def _answer_pending(self, reason: str) -> None:
+        with self._pending_lock:
+            pending, self._pending = self._pending, []
+        for call in pending:
+            if not call.ros_future.done():
+                call.bus_future.cancel()
+                call.ros_future.set_result(CommandRefused(f'{call.label}: {reason}'))
+
     def _on_speed_reference(self, name: str, message: Float32) -> None:
-        inactive = self._inactive_reason()
-        if inactive:
-            self.get_logger().warning(f'{name}/speed_reference: {inactive}',
+        bus = self.bus
+        if not self.active or bus is None:
+            self.get_logger().warning(f'{name}/speed_reference: {self._inactive_reason()}',
                                       throttle_duration_sec=1.0)
             return
         try:
-            self.bus.set_speed_reference(name, message.data, from_topic=True)
+            bus.set_speed_reference(name, message.data, from_topic=True)
         except CommandRefused as error:
             self.get_logger().warning(f'{name}/speed_reference: {error}',
                                       throttle_duration_sec=1.0)
@@ -352,60 +435,37 @@ class DriveBridgeNode(LifecycleNode):
             self.get_logger().error(f'{name}/speed_reference: internal error '
                                     f'{type(error).__name__}: {error}')
 
-    # -- bus events (bus thread -> executor) --------------------------------------------
+    # -- bus events (bus thread) ----------------------------------------------------------
     def _on_bus_event(self, event: BusEvent) -> None:
-        self._events.put(event)
-        self._guard.trigger()
-
-    def _publish_events(self) -> None:
-        while True:
-            try:
-                event = self._events.get_nowait()
-            except queue.Empty:
+        """Publish a reading, or log a change, as the bus thread reports it."""
+        with self._publishing:
+            publishers = self._device_publishers.get(event.device)
+            if publishers is None:  # an event of a bus closed since
                 return
             try:
-                self._publish_event(event)
-            except Exception as error:  # noqa: B902 - a bug must not kill the node
+                self._publish_event(publishers, event)
+            except Exception as error:  # noqa: B902 - a bug must not kill the bus thread
                 self.get_logger().error(f'cannot publish {event.kind} of {event.device}: '
                                         f'{type(error).__name__}: {error}')
 
-    def _publish_event(self, event: BusEvent) -> None:
-        publishers = self._device_publishers.get(event.device)
-        if publishers is None:  # an event of a bus closed since
-            return
-        if event.kind == 'offline':
+    def _publish_event(self, publishers: DevicePublishers, event: BusEvent) -> None:
+        logger = self.get_logger()
+        if event.kind == 'reading' and event.reading is not None:
+            publishers.publish_reading(event.reading)
+        elif event.kind == 'offline':
             publishers.publish_state('offline')
-            self.get_logger().error(f'{event.device} offline: {event.message}')
+            logger.error(f'{event.device} offline: {event.message}')
         elif event.kind == 'error':
             publishers.publish_state('unknown')
-            self.get_logger().error(f'{event.device}: {event.message}')
+            logger.error(f'{event.device}: {event.message}')
         elif event.kind == 'notice':
-            self.get_logger().warning(f'{event.device}: {event.message}')
+            logger.warning(f'{event.device}: {event.message}')
         elif event.kind == 'online':
-            self.get_logger().info(f'{event.device} online')
-        elif event.kind == 'reading' and event.reading is not None:
-            self._publish_reading(publishers, event.reading)
+            logger.info(f'{event.device} online')
 
-    @staticmethod
-    def _publish_reading(publishers: _DevicePublishers, reading) -> None:
-        publishers.status_word.publish(UInt16(data=int(reading.status_word)))
-        publishers.trip_code.publish(UInt16(data=int(reading.trip_code)))
-        if reading.motor_current_a is not None:
-            publishers.motor_current.publish(Float32(data=float(reading.motor_current_a)))
-        if reading.motor_temperature_pct is not None:
-            publishers.motor_temperature.publish(
-                Float32(data=float(reading.motor_temperature_pct)))
-        if publishers.speed_feedback is not None and reading.speed_feedback_pct is not None:
-            publishers.speed_feedback.publish(Float32(data=float(reading.speed_feedback_pct)))
-        if publishers.alarm_word is not None and reading.alarm_word is not None:
-            publishers.alarm_word.publish(UInt32(data=int(reading.alarm_word)))
-        if publishers.warning_word is not None and reading.warning_word is not None:
-            publishers.warning_word.publish(UInt32(data=int(reading.warning_word)))
-        publishers.publish_trip(reading.trip_name)
-        publishers.publish_state(reading.state)
-
-    # -- diagnostics --------------------------------------------------------------------
-    def _publish_diagnostics(self) -> None:
+    # -- diagnostics and overdue calls --------------------------------------------------
+    def _on_diagnostics_timer(self) -> None:
+        self._answers.trigger()  # answer calls the bus left waiting too long
         try:
             self._diagnostics.publish(self._diagnostic_array())
         except Exception as error:  # noqa: B902 - a bug must not kill the node
@@ -418,103 +478,116 @@ class DriveBridgeNode(LifecycleNode):
         bus = self.bus
         if bus is None:
             return array
-        array.status = [diagnostic_status(bus.snapshot(name), self.config.link.describe(),
-                                          self.active)
+        commands = 'enabled' if self.active else 'refused (node inactive; stops taken ' \
+            'while a motor may run)'
+        fqn = self.get_fully_qualified_name()
+        array.status = [diagnostic_status(bus.snapshot(name), status_name(fqn, name),
+                                          self.config.link.describe(), commands)
                         for name in bus.device_names]
         return array
-
-    # -- shutdown -----------------------------------------------------------------------
-    def shutdown_bus(self) -> None:
-        """Stop the motors this node started (per stop_on_shutdown), then close the bus."""
-        self._close_bus(stop_motors=True)
-
-
-def diagnostic_status(snapshot: DeviceSnapshot, link: str,
-                      active: bool = True) -> DiagnosticStatus:
-    """Return the DiagnosticStatus of one device (contract: level, name, values)."""
-    status = DiagnosticStatus(
-        name=f'{NODE_NAME}: {snapshot.name}',
-        hardware_id=f'{snapshot.family} {snapshot.model} address {snapshot.unit}')
-    reading = snapshot.reading
-    values = {'link': link, 'online': str(snapshot.online),
-              'commands': 'enabled' if active else 'refused (node inactive)',
-              'allow_control': str(snapshot.allow_control),
-              'started_by_bridge': str(snapshot.started_by_bridge)}
-    if snapshot.online is not True or reading is None:
-        status.level = DiagnosticStatus.ERROR
-        prefix = 'offline' if snapshot.online is False else 'no reading'
-        status.message = f'{prefix}: {snapshot.status_text}'
-    else:
-        values.update(_reading_values(reading))
-        if reading.fault:
-            status.level, status.message = DiagnosticStatus.ERROR, reading.fault
-        elif reading.warnings or snapshot.stats.get('setup_error'):
-            warnings = reading.warnings + [snapshot.stats.get('setup_error', '')]
-            status.level = DiagnosticStatus.WARN
-            status.message = '; '.join(warning for warning in warnings if warning)
-        else:
-            status.level, status.message = DiagnosticStatus.OK, reading.state
-    values.update(snapshot.stats)
-    status.values = [KeyValue(key=key, value=str(value)) for key, value in values.items()]
-    return status
-
-
-def _reading_values(reading) -> Dict[str, str]:
-    values = {'state': reading.state, 'status_word': f'0x{reading.status_word:04X}',
-              'trip_code': str(reading.trip_code), 'trip': reading.trip_name}
-    if reading.motor_current_a is not None:
-        values['motor_current_a'] = f'{reading.motor_current_a:.1f}'
-    if reading.motor_temperature_pct is not None:
-        values['motor_temperature_pct'] = f'{reading.motor_temperature_pct:.0f}'
-    if reading.speed_feedback_pct is not None:
-        values['speed_feedback_pct'] = f'{reading.speed_feedback_pct:.2f}'
-    for key in ('alarm_word', 'warning_word'):
-        if getattr(reading, key) is not None:
-            values[key] = f'0x{getattr(reading, key):08X}'
-    values.update(reading.details)
-    return values
 
 
 def autostart(node: DriveBridgeNode) -> None:
     """Walk the node to active; raise ConfigError if the configuration is refused."""
     node._autostarting = True
-    configured = node.trigger_configure()
-    node._autostarting = False
+    try:
+        configured = node.trigger_configure()
+    finally:
+        node._autostarting = False
     if configured != TransitionCallbackReturn.SUCCESS:
         raise ConfigError(node.config_error or 'configure failed (see the log above)')
     if node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
         raise ConfigError('activate failed (see the log above)')
 
 
+def _spin(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
+    """Spin until ``stop``; a context shut down under the executor ends it quietly."""
+    while not stop.is_set():
+        try:
+            executor.spin_once(timeout_sec=0.5)
+        except (ExternalShutdownException, KeyboardInterrupt):
+            return
+        except Exception as error:  # noqa: B902 - rclpy#398: the context went away
+            if stop.is_set() or not rclpy.ok():
+                return
+            print(f'[drive_bridge] executor: {type(error).__name__}: {error}', file=sys.stderr,
+                  flush=True)
+
+
+def _wait_for_signal(stop: threading.Event) -> int:
+    """Wait in the main thread for an exit signal (they are blocked); return its number."""
+    while not stop.is_set():
+        received = signal.sigtimedwait(EXIT_SIGNALS, 0.5)
+        if received is not None:
+            return received.si_signo
+    return 0
+
+
+def _ignore_more_signals(done: threading.Event) -> None:
+    """During shutdown, take further exit signals and say they change nothing."""
+    while not done.is_set():
+        received = signal.sigtimedwait(EXIT_SIGNALS, 0.2)
+        if received is not None:
+            print(f'[drive_bridge] {signal.Signals(received.si_signo).name} again: already '
+                  'stopping the motors, then exiting', file=sys.stderr, flush=True)
+
+
 def main(args: Optional[List[str]] = None) -> int:
-    """Run the node until SIGINT/SIGTERM; exit 2 with one line on a configuration error."""
+    """Run the node until SIGINT/SIGTERM/SIGHUP; exit 2 with one line on a configuration error."""
+    argv = sys.argv if args is None else args
+    if '-h' in argv[1:] or '--help' in argv[1:]:
+        print(USAGE)
+        return 0
     try:
-        cfg.check_params_files(sys.argv if args is None else args)
+        cfg.check_params_files(argv)
     except ConfigError as error:
         print(f'[drive_bridge] configuration error: {error}', file=sys.stderr, flush=True)
         return 2
-    rclpy.init(args=args)
+    # Block the exit signals in every thread from here on (threads inherit the mask): the
+    # main thread takes them with sigtimedwait, so no KeyboardInterrupt ever lands inside a
+    # stop, and a second signal cannot cut the stops short.
+    signal.pthread_sigmask(signal.SIG_BLOCK, EXIT_SIGNALS)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node: Optional[DriveBridgeNode] = None
+    stop = threading.Event()
+    spinner: Optional[threading.Thread] = None
+    executor = SingleThreadedExecutor()
     exit_code = 0
     try:
         node = DriveBridgeNode()
         if node.autostart:
             autostart(node)
-        executor = MultiThreadedExecutor(num_threads=4)
         executor.add_node(node)
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.5)
+        spinner = threading.Thread(target=_spin, args=(executor, stop), name='ros-executor',
+                                   daemon=True)
+        spinner.start()
+        received = _wait_for_signal(stop)
+        node.get_logger().info(f'{signal.Signals(received).name}: stopping the motors that '
+                               'may run because of this node, then exiting')
     except ConfigError as error:
         print(f'[drive_bridge] configuration error: {error}', file=sys.stderr, flush=True)
         exit_code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     finally:
+        done = threading.Event()
+        threading.Thread(target=_ignore_more_signals, args=(done,), daemon=True).start()
         if node is not None:
             node.shutdown_bus()
+        stop.set()
+        executor.shutdown(timeout_sec=1.0)
+        if spinner is not None:
+            spinner.join(timeout=2.0)
+        if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        done.set()
     return exit_code
+
+
+USAGE = """usage: drive_bridge_node [--ros-args --params-file FILE [-r __ns:=/line1] ...]
+
+The drive_bridge node: one RS-485 bus (or Modbus gateway) with its soft starters and drives,
+as ROS 2 topics, services and parameters. Settings come from a ROS 2 parameters file; see the
+README and config/*.yaml. Exit status: 0 after a signal, 2 on a configuration error."""
 
 
 if __name__ == '__main__':

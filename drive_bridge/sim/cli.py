@@ -122,14 +122,14 @@ def build_server(args: argparse.Namespace):
     for model, unit in args.device:
         if unit in devices:
             raise SystemExit(f'drive_bridge_sim: address {unit} is used twice')
-        devices[unit] = make_device(model, now, **settings[SIM_MODELS[model][0]])
+        devices[unit] = make_device(model, now, **settings[SIM_MODELS[model]])
     for unit in args.hand_on:
         _set_hand(_device(devices, unit), True)
     for text in args.trip:
         unit, _, code = text.partition(':')
         _device(devices, int(unit)).model.trip(int(code), now)
     if args.protocol == 'ap_ascii':
-        if any(SIM_MODELS[model][0] != 'mcd' for model, _ in args.device) or args.tcp \
+        if any(SIM_MODELS[model] != 'mcd' for model, _ in args.device) or args.tcp \
                 is not None:
             raise SystemExit('drive_bridge_sim: AP ASCII serves MCD models on a pty only')
         server = ApAsciiSimServer({unit: device.model for unit, device in devices.items()})

@@ -15,11 +15,15 @@ import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from drive_bridge import config as cfg
-from drive_bridge.devices.base import DeviceReading, PollItem
+from drive_bridge.bus.device import BusDevice
+from drive_bridge.bus.runner import run_poll, TransactionRunner
+from drive_bridge.devices.contracts import DeviceReading, ParameterAccess, ParameterOptions
+from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.parameters import DATA_TYPES, TEXT
 from drive_bridge.errors import (
     CommandRefused, ConfigError, DeviceException, DriveBridgeError, LinkDown, ModelMismatch,
     NoResponse, ProtocolError, TransportError)
+from drive_bridge.transport.protocols import PROTOCOLS
 
 EXIT_FAILED, EXIT_USAGE = 1, 2
 SCAN_FAMILIES = ('fc', 'mcd', 'vlt')  # the order a scan tries them in (see scan_address)
@@ -34,16 +38,10 @@ class CliError(Exception):
 
 
 # -- the bus and the device ----------------------------------------------------------------
-def load_params_file(path: str) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]]]:
-    """Return (bus values, device blocks) from a node parameters file."""
-    import yaml
-    cfg.check_params_files(['--params-file', path])
-    with open(path) as stream:
-        content = yaml.safe_load(stream)
-    parameters = next(iter(content.values()))['ros__parameters']
-    devices = {name: parameters.pop(name) for name in list(parameters)
-               if isinstance(parameters[name], dict)}
-    return parameters, devices
+def load_params_file(path: str, node: Optional[str] = None) \
+        -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]]]:
+    """Return (bus values, device blocks) of the node's block in a parameters file."""
+    return cfg.split_parameters(cfg.select_block(path, node))
 
 
 def bus_values_from(args: argparse.Namespace) -> Dict[str, Any]:
@@ -56,7 +54,7 @@ def bus_values_from(args: argparse.Namespace) -> Dict[str, Any]:
 def make_bus(args: argparse.Namespace, device_values: Optional[Dict[str, Any]] = None):
     """Return (BridgeConfig, DeviceConfig) for the device the arguments name."""
     if args.config:
-        bus, devices = load_params_file(args.config)
+        bus, devices = load_params_file(args.config, getattr(args, 'node', None))
         bus.update(bus_values_from(args))
         name = args.device or (bus.get('devices') or [None])[0]
         if name not in devices:
@@ -78,49 +76,56 @@ def make_bus(args: argparse.Namespace, device_values: Optional[Dict[str, Any]] =
 
 
 class Session:
-    """One device on an open bus; transactions run here, in this thread."""
+    """
+    One device on an open bus; transactions run here, in this thread.
+
+    They go through the bus's transaction runner, so the same checks hold as in the node:
+    a monitor-only device (``allow_control: false``) gets no write at all.
+    """
 
     def __init__(self, config, device):
         self.config = config
         self.device = device
-        self.profile = device.make_spec().profile
+        self.record = BusDevice(device.make_spec(), time.monotonic())
+        self.profile = self.record.profile
         self.transport = config.make_transport()
+        self.runner = TransactionRunner(self.transport, config.timing.frame_gap_s)
         self.transport.connect()
+        self._polled = False
 
     def close(self) -> None:
         """Close the port."""
         self.transport.close()
 
-    def run(self, transactions: Sequence[object], optional: Sequence[bool] = ()) -> list:
-        """Run transactions in order; an optional one may be refused (its result: the error)."""
+    def run(self, requests: Sequence[object]) -> list:
+        """Run requests in order; a refusal is a CliError in the device's words."""
         results = []
-        for position, transaction in enumerate(transactions):
+        for request in requests:
             try:
-                results.append(self.transport.execute(self.device.address, transaction))
+                results.append(self.runner.transact(self.record, request))
             except DeviceException as error:
-                if position < len(optional) and optional[position]:
-                    results.append(error)
-                    continue
                 raise CliError(f'{self.device.name} refused it: '
-                               f'{self.profile.explain_exception(error.code)}') from None
+                               f'{self.runner.explain(self.record, error)}') from None
         return results
 
     def poll(self) -> DeviceReading:
         """Read the device once and return its decoded reading."""
-        items = [item if isinstance(item, PollItem) else PollItem(item)
-                 for item in self.profile.poll_plan()]
-        results = self.run([item.transaction for item in items],
-                           [item.optional for item in items])
-        if hasattr(self.profile, 'follow_up_plan'):
-            follow = self.profile.follow_up_plan(results)
-            results += self.run([item.transaction for item in follow])
-        return self.profile.decode(results)
+        try:
+            reading = run_poll(self.runner, self.record)
+        except DeviceException as error:
+            raise CliError(f'{self.device.name} refused the poll: '
+                           f'{self.runner.explain(self.record, error)}') from None
+        self._polled = True
+        return reading
 
-    def parameter(self, number: int, value=None, **options):
+    def parameter(self, number: int, value=None, options: ParameterOptions = ParameterOptions()):
         """Read (value None) or write one parameter; return its value or the outcome."""
-        if hasattr(self.profile, 'model') and self.profile.model is None:
+        if not isinstance(self.profile, ParameterAccess):
+            raise CliError(f'{self.device.name} ({self.device.family}) has no parameter '
+                           'access', EXIT_USAGE)
+        if self.profile.configured_model == 'auto' and not self._polled:
             self.poll()  # model auto: the parameter map depends on what the device is
-        plan = self.profile.parameter_plan(number, value, **options)
+        plan = self.profile.parameter_plan(number, value, options)
         return plan.decode(self.run(plan.transactions))
 
 
@@ -149,37 +154,32 @@ def parse_value(text: str):
     return text
 
 
-def parameter_options(args: argparse.Namespace) -> Dict[str, Any]:
+def parameter_options(args: argparse.Namespace, eeprom: bool = False) -> ParameterOptions:
     """Return the drive parameter options given (type, conversion index, array index)."""
-    options = {}
-    for name, key in (('type', 'data_type'), ('conversion', 'conversion'),
-                      ('index', 'index')):
-        if getattr(args, name, None) is not None:
-            options[key] = getattr(args, name)
-    return options
+    return ParameterOptions(data_type=getattr(args, 'type', None),
+                            conversion=getattr(args, 'conversion', None),
+                            index=getattr(args, 'index', None), eeprom=eeprom)
 
 
-def describe_parameter(session: Session, number: int, options: Dict[str, Any]) -> str:
+def describe_parameter(session: Session, number: int, options: ParameterOptions) -> str:
     """Return 'name' and where the definition came from, for drives; '' otherwise."""
-    data = getattr(session.profile, 'data', None)
-    if data is None:
+    if not isinstance(session.profile, DriveProfile):
         return ''
-    spec = data.spec(number, options.get('data_type'), options.get('conversion'))
+    spec = session.profile.data.spec(number, options.data_type, options.conversion)
     return f'{spec.name} ({spec.data_type}, conversion index {spec.conversion})'
 
 
 def backup_numbers(session: Session) -> List[int]:
     """Return the parameters a backup covers for this device."""
     profile = session.profile
-    if getattr(profile, 'model', '') is None:
+    if profile.configured_model == 'auto':
         session.poll()  # model auto: the parameter count depends on the model
-    data = getattr(profile, 'data', None)
-    if data is not None:
-        return sorted(number for number in data.parameters if data.is_setting(number))
-    features = getattr(profile, 'features', None)
-    if features is not None and features.max_parameter:
-        return list(range(1, features.max_parameter + 1))
-    raise CliError(f'{session.device.name} ({session.device.family}) has no parameter access')
+    numbers = list(profile.parameter_numbers()) if isinstance(profile, ParameterAccess) \
+        else []
+    if not numbers:
+        raise CliError(f'{session.device.name} ({session.device.family}) has no parameter '
+                       'access')
+    return sorted(numbers)
 
 
 def progress(done: int, total: int, label: str, stream=sys.stderr) -> None:
@@ -226,7 +226,7 @@ def command_status(args, out) -> int:
 
 
 def _model(session: Session) -> str:
-    return getattr(session.profile, 'model', None) or session.device.model
+    return session.profile.model
 
 
 def command_get(args, out) -> int:
@@ -235,7 +235,7 @@ def command_get(args, out) -> int:
 
     def get(session: Session) -> None:
         options = parameter_options(args)
-        value = session.parameter(number, **options)
+        value = session.parameter(number, options=options)
         about = describe_parameter(session, number, options)
         print(f'{args.parameter} = {value}' + (f'  # {about}' if about else ''), file=out)
     with_session(args, get)
@@ -249,9 +249,8 @@ def command_set(args, out) -> int:
 
     def set_(session: Session) -> None:
         options = parameter_options(args)
-        write_options = dict(options, eeprom=True) if args.eeprom else options
-        print(session.parameter(number, value, **write_options), file=out)
-        print(f'{args.parameter} = {session.parameter(number, **options)} (read back)',
+        print(session.parameter(number, value, parameter_options(args, args.eeprom)), file=out)
+        print(f'{args.parameter} = {session.parameter(number, options=options)} (read back)',
               file=out)
     with_session(args, set_)
     return 0
@@ -299,9 +298,9 @@ def command_restore(args, out) -> int:
             raise CliError(f'{args.file} is a backup of a {document.get("family")} device; '
                            f'{session.device.name} is {session.device.family}', EXIT_USAGE)
         values = document['parameters']
-        options = {'eeprom': True} if args.eeprom else {}
+        options = ParameterOptions(eeprom=args.eeprom)
         for done, (number, value) in enumerate(values.items(), 1):
-            session.parameter(number, value, **options)
+            session.parameter(number, value, options)
             if not args.quiet:
                 progress(done, len(values), 'writing')
         verify = read_all(session, list(values), 'verifying', args)
@@ -465,7 +464,9 @@ def _subcommand_adder(commands):
         sub.set_defaults(function=function)
         bus = sub.add_argument_group('bus (default: from --config, else the node defaults)')
         bus.add_argument('--config', help="the node's parameters file (YAML)")
-        bus.add_argument('--protocol', choices=cfg.PROTOCOLS)
+        bus.add_argument('--protocol', choices=tuple(PROTOCOLS))
+        bus.add_argument('--node', help='the node block of --config (its full name, e.g. '
+                         '/line1/drive_bridge) when the file has several')
         bus.add_argument('--port', help='serial device or URL, e.g. /dev/ttyUSB0')
         bus.add_argument('--host')
         bus.add_argument('--tcp-port', dest='tcp_port', type=int)

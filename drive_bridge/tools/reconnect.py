@@ -122,7 +122,9 @@ def run_drill(drill: str, cycles: int = 20, down_s: float = 0.3) -> DrillReport:
             device = 'mixer'
         else:
             server = make_sim_server({1: 'fc51', 20: 'mcd500'})
-            config = _serial_config(server.open_pty(os.path.join(folder, 'ttyUSB_sim')))
+            link = os.path.join(folder, 'ttyUSB_sim')  # stable, as a udev rule makes one
+            server.open_pty(link)
+            config = _serial_config(link)
             device = 'conv'
         server.start()
         log = EventLog()

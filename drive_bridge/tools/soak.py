@@ -29,6 +29,7 @@ from drive_bridge.config import build_config
 from drive_bridge.devices import mcd
 from drive_bridge.devices.drive import COIL_CONTROL
 from drive_bridge.protocol import fc_control, lvsg, rtu
+from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.words import coils_to_words, registers_to_bytes
 from drive_bridge.sim.devices import make_device
 from drive_bridge.sim.faults import FaultPlan, MODBUS_FAULTS
@@ -122,7 +123,7 @@ def _mcd_control(frame: rtu.RtuFrame) -> Optional[bool]:
     if frame.function == rtu.WRITE_SINGLE_REGISTER:
         address, value = rtu.parse_address_count(frame.data)
         if address == mcd.REGISTER['command'].address:
-            return value == mcd.COMMAND_VALUES['start']
+            return value == mcd.COMMAND_VALUES[Command.START]
     return None
 
 
@@ -392,10 +393,9 @@ def _loop(master: BusMaster, driver: _Driver, settings: SoakSettings, report: So
 
 def _shutdown_stops(master: BusMaster, report: SoakReport) -> None:
     """Stop what the soak started, running the bus in this thread until the stops end."""
-    futures = [master.submit_command(name, 'stop') for name in master.device_names
-               if master.snapshot(name).started_by_bridge]
-    deadline = time.monotonic() + 5.0
-    while not all(future.done() for future in futures) and time.monotonic() < deadline:
+    future = master.begin_stop_all('soak end', timeout_s=5.0)
+    deadline = time.monotonic() + 6.0
+    while not future.done() and time.monotonic() < deadline:
         try:
             master.run_once()
         except Exception as error:  # noqa: B902 - counted

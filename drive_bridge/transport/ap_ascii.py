@@ -8,11 +8,11 @@ silence is NoResponse (an unknown address never answers); anything else is BadFr
 """
 
 import time
-from typing import Callable, Dict, Optional
+from typing import Callable, Optional
 
-from drive_bridge.devices.base import AsciiCommand, AsciiRequest
 from drive_bridge.errors import BadFrame, DeviceException, NoResponse
 from drive_bridge.protocol import ap_ascii
+from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 import serial
@@ -34,11 +34,6 @@ class ApAsciiTransport(SerialPortTransport):
         self.nak_retries = nak_retries
         self.address_lrc_includes_eot = address_lrc_includes_eot
         self.naks = 0  # NAKs seen (each one retried or reported)
-        self.last_recovered: Dict[str, int] = {}  # NAKs retried in the last transaction
-
-    def framing(self) -> tuple:
-        """Return (parity, stop bits): AP ASCII is always 8N1."""
-        return 'N', 1
 
     def execute(self, unit: int, transaction) -> Optional[int]:
         """Run one transaction; return the status byte or data value of a request."""

@@ -4,9 +4,8 @@ from dataclasses import dataclass
 import os
 
 from drive_bridge.protocol import rtu
+from drive_bridge.transport.protocols import PROTOCOLS
 
-SERIAL_PROTOCOLS = ('modbus_rtu', 'ap_ascii')
-TCP_PROTOCOLS = ('modbus_tcp', 'rtu_over_tcp')
 URL_PREFIXES = ('socket://', 'rfc2217://', 'loop://')
 
 
@@ -25,21 +24,34 @@ class LinkSettings:
     local_echo: bool = False
 
     @property
+    def effective_parity(self) -> str:
+        """Return the parity in use (a protocol with fixed framing overrides the setting)."""
+        fixed = PROTOCOLS[self.protocol].fixed_framing
+        return fixed[0] if fixed else self.parity
+
+    @property
     def effective_stopbits(self) -> int:
-        """Return the stop bits in use (0: the Modbus standard; AP ASCII is always 8N1)."""
-        if self.protocol == 'ap_ascii':
-            return 1
-        return self.stopbits or rtu.default_stopbits(self.parity)
+        """Return the stop bits in use (0: the protocol's default for the parity)."""
+        spec = PROTOCOLS[self.protocol]
+        if spec.fixed_framing:
+            return spec.fixed_framing[1]
+        return self.stopbits or spec.default_stopbits(self.parity)
 
     @property
     def is_serial(self) -> bool:
         """Return whether the bus is a local serial port."""
-        return self.protocol in SERIAL_PROTOCOLS
+        return PROTOCOLS[self.protocol].is_serial
+
+    @property
+    def frame_gap_s(self) -> float:
+        """Return the silence the protocol keeps between transactions on this link."""
+        return PROTOCOLS[self.protocol].frame_gap_s(self.baudrate, self.effective_parity,
+                                                    self.effective_stopbits)
 
     def describe(self) -> str:
         """Return the link in words, for messages."""
         if self.is_serial:
-            return (f'{self.port} {self.baudrate} {self.parity}'
+            return (f'{self.port} {self.baudrate} {self.effective_parity}'
                     f'{self.effective_stopbits}')
         return f'{self.protocol} {self.host}:{self.tcp_port}'
 

@@ -12,9 +12,10 @@ import inspect
 import logging
 from typing import List, Optional
 
-from drive_bridge.devices.base import (
-    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.protocol.requests import (
+    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
+from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import (  # noqa: F401 - LinkSettings, wire_time_s re-exported
     LinkSettings, open_hint, port_missing, wire_time_s)
 import pymodbus
@@ -39,11 +40,11 @@ _GATEWAY_EXCEPTIONS = {0x0A: 'gateway path unavailable', 0x0B: 'gateway target d
 RECEIVE_POLL_INTERVAL_S = 0.0005
 
 
-class ModbusTransport:
+class ModbusTransport(Transport):
     """Run single Modbus transactions on one bus; not thread-safe (the bus thread owns it)."""
 
     def __init__(self, settings: LinkSettings):
-        self.settings = settings
+        super().__init__(settings)
         self._client = None
         self._received = bytearray()
 
@@ -131,11 +132,7 @@ class ModbusTransport:
         response = self._client.read_holding_registers(
             transaction.address, count=transaction.count, **keyword)
         self._check(response)
-        registers = list(response.registers)
-        if len(registers) != transaction.count and \
-                (transaction.exact or not 0 < len(registers) <= transaction.count):
-            raise BadFrame(f'expected {transaction.count} registers, got {len(registers)}')
-        return registers
+        return transaction.check_count(list(response.registers))
 
     def _read_coils(self, keyword: dict, transaction: ReadCoils) -> List[bool]:
         response = self._client.read_coils(transaction.address, count=transaction.count,

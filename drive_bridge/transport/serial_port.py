@@ -4,6 +4,7 @@ import time
 from typing import Callable
 
 from drive_bridge.errors import LinkDown
+from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import LinkSettings, open_hint, port_missing
 import serial
 
@@ -17,12 +18,12 @@ except ImportError:  # not POSIX
 PORT_ERRORS = (serial.SerialException, OSError, TermiosError)
 
 
-class SerialPortTransport:
+class SerialPortTransport(Transport):
     """Own one pyserial port (device path or URL such as ``socket://``); subclasses talk."""
 
     def __init__(self, settings: LinkSettings,
                  open_port: Callable[..., object] = serial.serial_for_url):
-        self.settings = settings
+        super().__init__(settings)
         self._open_port = open_port
         self._port = None
 
@@ -33,7 +34,7 @@ class SerialPortTransport:
 
     def framing(self) -> tuple:
         """Return (parity, stop bits) to open the port with."""
-        return self.settings.parity, self.settings.effective_stopbits
+        return self.settings.effective_parity, self.settings.effective_stopbits
 
     def connect(self) -> None:
         """Open the port; raise LinkDown with the reason in words."""
@@ -73,16 +74,20 @@ class SerialPortTransport:
 
     def _read(self, count: int, deadline: float) -> bytes:
         """Read up to ``count`` bytes; return early only when the deadline passes."""
-        port = self._port
         data = b''
         while len(data) < count:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 break
-            if port.timeout != remaining:
-                port.timeout = remaining
-            chunk = port.read(count - len(data))
+            chunk = self._read_some(count - len(data), remaining)
             if not chunk:
                 break
             data += chunk
         return data
+
+    def _read_some(self, count: int, timeout_s: float) -> bytes:
+        """Read up to ``count`` bytes, waiting at most ``timeout_s`` for them."""
+        port = self._port
+        if port.timeout != timeout_s:
+            port.timeout = timeout_s
+        return port.read(count)

@@ -10,91 +10,49 @@ Failures are the typed errors of :mod:`drive_bridge.errors`.
 """
 
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Any
 
-from drive_bridge.devices.base import (
-    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.errors import (
-    BadFrame, CrcError, DeviceException, NoResponse, TruncatedFrame, WrongAddress)
+    BadFrame, CrcError, DeviceException, LineBabble, NoResponse, TruncatedFrame, WrongAddress)
 from drive_bridge.protocol import rtu
+from drive_bridge.protocol.requests import ModbusRequest
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 
 
-def _request(unit: int, transaction) -> RtuFrame:
-    """Return the request frame of one transaction."""
-    if isinstance(transaction, ReadRegisters):
-        return rtu.read_registers_request(unit, transaction.address, transaction.count)
-    if isinstance(transaction, ReadCoils):
-        return rtu.read_coils_request(unit, transaction.address, transaction.count)
-    if isinstance(transaction, WriteRegister):
-        return rtu.write_register_request(unit, transaction.address, transaction.value)
-    if isinstance(transaction, WriteCoil):
-        return rtu.write_coil_request(unit, transaction.address, transaction.value)
-    if isinstance(transaction, WriteRegisters):
-        return rtu.write_registers_request(unit, transaction.address, list(transaction.values))
-    if isinstance(transaction, WriteCoils):
-        return rtu.write_coils_request(unit, transaction.address, list(transaction.values))
-    raise TypeError(f'unsupported transaction {transaction!r}')
-
-
-def _registers(transaction: ReadRegisters, reply: RtuFrame) -> List[int]:
-    data = reply.data
-    if not data or data[0] != len(data) - 1 or data[0] % 2:
-        raise BadFrame(f'register reply with byte count {data[:1].hex()} and '
-                       f'{len(data) - 1} data bytes')
-    registers = [int.from_bytes(data[i:i + 2], 'big') for i in range(1, len(data), 2)]
-    if len(registers) != transaction.count and \
-            (transaction.exact or not 0 < len(registers) <= transaction.count):
-        raise BadFrame(f'expected {transaction.count} registers, got {len(registers)}')
-    return registers
-
-
-def _coils(transaction: ReadCoils, reply: RtuFrame) -> List[bool]:
-    data = reply.data
-    if not data or data[0] != len(data) - 1 or data[0] * 8 < transaction.count:
-        raise BadFrame(f'expected {transaction.count} coils, got {len(data) - 1} data bytes')
-    return [bool(data[1 + i // 8] >> (i % 8) & 1) for i in range(transaction.count)]
-
-
-_PARSERS: Dict[type, Callable] = {ReadRegisters: _registers, ReadCoils: _coils}
 _INVALID_REPLY = {'crc': CrcError, 'wrong_address': WrongAddress}
 
 
 class RtuSerialTransport(SerialPortTransport):
     """Run single Modbus RTU transactions on a serial port; the bus thread owns it."""
 
-    def execute(self, unit: int, transaction) -> Optional[list]:
-        """Run one transaction with device ``unit``; return registers or coils read, or None."""
+    def execute(self, unit: int, request: ModbusRequest) -> Any:
+        """Run one request with device ``unit``; return registers or coils read, or None."""
         self._require_port()
-        request = _request(unit, transaction)
+        if not isinstance(request, ModbusRequest):
+            raise TypeError(f'unsupported request {request!r}')
+        frame = request.frame(unit)
         try:
-            reply = self._exchange(request)
+            reply = self._exchange(frame)
         except PORT_ERRORS as error:
             raise self._port_failed(error) from error
         if reply.function & 0x80:
             raise DeviceException(reply.data[0])
-        parser = _PARSERS.get(type(transaction))
-        if parser is not None:
-            return parser(transaction, reply)
-        if reply.data[:4] != request.data[:4]:  # 05/06 echo, 0F/10 address + quantity
-            raise BadFrame(f'write reply {reply.data[:4].hex(" ")} does not match the request '
-                           f'{request.data[:4].hex(" ")}')
-        return None
+        return request.parse(frame, reply)
 
     def _exchange(self, request: RtuFrame) -> RtuFrame:
         port = self._port
         port.reset_input_buffer()  # a late reply to an earlier request must not count
         encoded = request.encode()
+        deadline = time.monotonic() + self.settings.timeout_s
         port.write(encoded)
         if self.settings.local_echo:
-            echo = self._read(len(encoded), time.monotonic() + self.settings.timeout_s)
+            echo = self._read(len(encoded), deadline)
             if echo != encoded:
                 raise BadFrame('the adapter did not echo the request (local_echo is set)')
-        return self._receive(request.unit, request.function)
+        return self._receive(request.unit, request.function, deadline)
 
-    def _receive(self, unit: int, function: int) -> RtuFrame:
-        deadline = time.monotonic() + self.settings.timeout_s
+    def _receive(self, unit: int, function: int, deadline: float) -> RtuFrame:
         buffer = b''
         needed = rtu.MIN_RESPONSE_BYTES
         while True:
@@ -103,7 +61,7 @@ class RtuSerialTransport(SerialPortTransport):
             if result.frame is not None:
                 return result.frame
             if result.error:
-                self._drain()
+                self._drain(deadline)
                 error_type = _INVALID_REPLY.get(result.error_kind, BadFrame)
                 raise error_type(f'invalid reply ({result.error}), {len(buffer)} bytes '
                                  'received')
@@ -114,11 +72,25 @@ class RtuSerialTransport(SerialPortTransport):
                                      f'within {self.settings.timeout_s:g} s')
             needed = result.needed
 
-    def _drain(self) -> None:
-        """Drop what is still arriving after a bad reply (one character-gap of silence)."""
-        port = self._port
+    def _drain(self, deadline: float) -> None:
+        """
+        Drop what still arrives after a bad reply, until one character-gap of silence.
+
+        Bounded by the transaction's deadline (at least a few gaps from now): a line that is
+        still talking then is babbling (another master, or a faulty device), a link fault.
+        """
         gap = max(0.005, rtu.frame_gap_s(self.settings.baudrate, self.settings.parity,
                                          self.settings.effective_stopbits))
-        port.timeout = gap
-        while port.read(256):
-            pass
+        limit = max(deadline, time.monotonic() + 4 * gap)
+        dropped = 0
+        while True:
+            remaining = limit - time.monotonic()
+            if remaining <= 0:
+                raise LineBabble(f'bus offline: {self.settings.describe()}: the line keeps '
+                                 f'talking ({dropped} bytes past a bad reply, no pause within '
+                                 f'the {self.settings.timeout_s:g} s transaction): another '
+                                 'master or a faulty device is sending')
+            chunk = self._read_some(256, min(gap, remaining))
+            if not chunk:
+                return
+            dropped += len(chunk)

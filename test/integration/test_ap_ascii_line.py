@@ -4,8 +4,8 @@ import time
 
 from drive_bridge.bus.master import BusMaster
 from drive_bridge.config import build_config
-from drive_bridge.devices.base import AsciiCommand, AsciiRequest
 from drive_bridge.errors import BadFrame, CommandRefused, DeviceException, NoResponse
+from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.transport.ap_ascii import ApAsciiTransport
 from drive_bridge.transport.link import LinkSettings

@@ -4,9 +4,9 @@ import time
 
 from drive_bridge.bus.master import BusMaster
 from drive_bridge.config import build_config
-from drive_bridge.devices.base import ReadRegisters
 from drive_bridge.errors import CrcError, TruncatedFrame
 from drive_bridge.protocol import rtu
+from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.sim import cli as sim_cli
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.faults import (

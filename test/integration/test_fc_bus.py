@@ -3,13 +3,14 @@
 from drive_bridge.bus.master import BusMaster, BusTiming
 from drive_bridge.config import build_config
 from drive_bridge.devices import fc
-from drive_bridge.devices.base import (
-    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
+from drive_bridge.devices.contracts import ParameterOptions
 from drive_bridge.errors import CommandRefused, DeviceException
 from drive_bridge.protocol import words
+from drive_bridge.protocol.requests import (
+    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.sim.devices import make_sim_server
-from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
+from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
 from integration_helpers import wait_until
 import pytest
 
@@ -28,7 +29,7 @@ def sim():
 @pytest.fixture(params=SERIAL_ENGINES)
 def transport(sim, request):
     transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=0.2),
-                               request.param)
+                               {'serial_engine': request.param})
     transport.connect()
     yield transport
     transport.close()
@@ -134,7 +135,7 @@ def test_alarm_trip_reset_and_parameters(bus, sim):
     assert wait_until(lambda: state(bus) == 'ready', 2.0)
     assert drive.control_word == 0x043C and drive.output_pct == 0.0  # no restart
     assert bus.read_parameter('conv', 1540).result(3) == 'FC-051PK75T4E20H3BXC'
-    assert bus.write_parameter('conv', 341, 2.5, eeprom=True).result(3)
+    assert bus.write_parameter('conv', 341, 2.5, ParameterOptions(eeprom=True)).result(3)
     assert drive.parameters[341] == 250 and drive.eeprom_writes
     with pytest.raises(CommandRefused, match='no write access'):
         bus.write_parameter('conv', 1614, 1.0).result(3)

@@ -2,18 +2,18 @@
 
 import time
 
-from drive_bridge.devices.base import ReadRegisters, WriteRegister
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.sim.mcd_device import make_mcd_server as make_server
-from drive_bridge.transport.factory import make_transport, SERIAL_ENGINES
 from drive_bridge.transport.modbus import LinkSettings
+from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
 import pytest
 
 MCD500_PRODUCT = (7 << 3) | 1
 
 
 def transport_for(settings, engine='pymodbus'):
-    transport = make_transport(settings, engine)
+    transport = make_transport(settings, {'serial_engine': engine})
     transport.connect()
     return transport
 
@@ -72,7 +72,8 @@ def test_corrupted_reply_is_a_bad_frame(pty_transport, sim_bus):
 
 @pytest.mark.parametrize('engine', SERIAL_ENGINES)
 def test_missing_port_is_link_down_with_its_name(engine):
-    transport = make_transport(LinkSettings(port='/dev/ttyDOESNOTEXIST'), engine)
+    transport = make_transport(LinkSettings(port='/dev/ttyDOESNOTEXIST'),
+                               {'serial_engine': engine})
     with pytest.raises(LinkDown, match='bus offline: /dev/ttyDOESNOTEXIST not found'):
         transport.connect()
 

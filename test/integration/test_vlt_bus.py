@@ -2,8 +2,8 @@
 
 from drive_bridge.bus.master import BusMaster, BusTiming
 from drive_bridge.config import build_config
-from drive_bridge.devices.base import ReadRegisters
 from drive_bridge.errors import CommandRefused, DeviceException
+from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from integration_helpers import wait_until

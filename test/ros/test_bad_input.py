@@ -105,7 +105,7 @@ def test_the_node_survived_the_table(node):
 @pytest.mark.parametrize('content, expected', [
     ('/**/drive_bridge:\n  ros__parameters:\n    devices: [a\n', 'is not valid YAML at line 4'),
     ('just text\n', 'must map a node name'),
-    ('/**/drive_bridge:\n  ros__parameters:\n    devices: []\n', "'devices' is required"),
+    ('/**/drive_bridge:\n  ros__parameters:\n    devices: []\n', "'devices' is empty"),
     (None, 'cannot read the parameters file'),
 ])
 def test_malformed_parameter_files_stop_the_node_with_one_line(tmp_path, content, expected):

@@ -78,9 +78,10 @@ def test_offline_device(node):
     assert node.wait_state('dead', 'offline')
     response = node.call('dead', 'start')
     assert not response.success and 'offline' in response.message
-    assert node.spin_until(lambda: node.diagnostics('dead') is not None)
+    assert node.spin_until(lambda: node.diagnostics('dead') is not None and
+                           node.diagnostics('dead').message.startswith('offline'))
     status = node.diagnostics('dead')
-    assert status.level == DiagnosticStatus.ERROR and status.message.startswith('offline')
+    assert status.level == DiagnosticStatus.ERROR
     assert node.values('dead', 'motor_current') == []  # never a stale number
 
 

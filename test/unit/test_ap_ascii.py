@@ -1,9 +1,12 @@
 """Unit tests of the AP ASCII codec (every worked frame) and the MCD AP ASCII profile."""
 
-from drive_bridge.devices.base import AsciiCommand, AsciiRequest
+from drive_bridge.devices.contracts import FixedControl
 from drive_bridge.devices.mcd_ascii import McdAsciiProfile
 from drive_bridge.errors import CommandRefused, ProtocolError
 from drive_bridge.protocol import ap_ascii
+from drive_bridge.protocol.commands import Command
+from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest
+from fakes import drive_cycle
 import pytest
 
 
@@ -81,34 +84,36 @@ def test_reply_decoder_need_more_bytes_and_errors():
 
 def test_profile_requests_and_commands():
     profile = McdAsciiProfile('mcd500')
-    assert profile.poll_plan() == [AsciiRequest('C22', 'status'), AsciiRequest('C18', 'status'),
-                                   AsciiRequest('D10', 'data'), AsciiRequest('D12', 'data')]
-    assert McdAsciiProfile('mcd201').poll_plan() == [AsciiRequest('C22', 'status'),
-                                                     AsciiRequest('C18', 'status')]
-    assert profile.command_plan('start').writes == (AsciiCommand('B10'),)
-    assert profile.command_plan('quick_stop').writes == (AsciiCommand('B16'),)
-    assert profile.command_plan('forced_comms_trip').writes == (AsciiCommand('B18'),)
+    requests, _ = drive_cycle(profile, [0x41, 255, 0, 0])
+    assert requests == [AsciiRequest('C22', 'status'), AsciiRequest('C18', 'status'),
+                        AsciiRequest('D10', 'data'), AsciiRequest('D12', 'data')]
+    requests, _ = drive_cycle(McdAsciiProfile('mcd201'), [0x41, 255])
+    assert requests == [AsciiRequest('C22', 'status'), AsciiRequest('C18', 'status')]
+    control = FixedControl()
+    assert profile.command_plan(Command.START, control).writes == (AsciiCommand('B10'),)
+    assert profile.command_plan(Command.QUICK_STOP, control).writes == (AsciiCommand('B16'),)
+    assert profile.command_plan(Command.FORCED_COMMS_TRIP, control).writes == \
+        (AsciiCommand('B18'),)
     with pytest.raises(CommandRefused):
-        profile.command_plan('coast_stop')
+        profile.command_plan(Command.COAST_STOP, control)
     with pytest.raises(CommandRefused, match='MCD 3000 has none'):
-        McdAsciiProfile('mcd3000').command_plan('forced_comms_trip')
+        McdAsciiProfile('mcd3000').command_plan(Command.FORCED_COMMS_TRIP, control)
     with pytest.raises(CommandRefused, match='no parameter access'):
         profile.parameter_plan(1)
 
 
 def test_profile_decode_states_trips_and_comms_fault():
     profile = McdAsciiProfile('mcd500')
-    profile.poll_plan()
-    reading = profile.decode([0x43, 255, 80, 40])
+    _, reading = drive_cycle(profile, [0x43, 255, 80, 40])
     assert reading.state == 'running' and reading.trip_code == 0 and reading.trip_name == ''
     assert reading.motor_current_a == 80.0 and reading.motor_temperature_pct == 40.0
-    tripped = profile.decode([0x46, 2, 0, 106])
+    _, tripped = drive_cycle(profile, [0x46, 2, 0, 106])
     assert (tripped.state, tripped.trip_code) == ('tripped', 2)
     assert tripped.trip_name == 'Motor overload (thermal model)'
-    fault = profile.decode([0xC1, 255, 0, 0])
+    _, fault = drive_cycle(profile, [0xC1, 255, 0, 0])
     assert fault.fault.startswith('communications device fault (C22 bit 7)')
     with pytest.raises(ProtocolError):
-        profile.decode([None, 255, 0, 0])
+        drive_cycle(profile, [None, 255, 0, 0])
 
 
 def test_mcd3000_has_its_own_trip_table():

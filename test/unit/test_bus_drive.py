@@ -1,33 +1,41 @@
 """Unit tests of the bus with FC-profile drives: keepalive, deadman, set-up, exceptions."""
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
+from drive_bridge.bus.motor import Motion
 from drive_bridge.devices import fc
-from drive_bridge.devices.base import ReadCoils, ReadRegisters, WriteCoils, WriteRegisters
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.errors import CommandRefused, DeviceException, NoResponse
 from drive_bridge.protocol import words
+from drive_bridge.protocol.requests import ReadCoils, ReadRegisters, WriteCoils, WriteRegisters
+from drive_bridge.transport.base import Transport
+from drive_bridge.transport.link import LinkSettings
 from fakes import FakeClock, run_for
 import pytest
 
 RTT_S = 0.02
 
 
-class FakeDrive:
+class FakeDrive(Transport):
     """One drive on a fake bus: answers the status coils and readouts, logs writes."""
 
     def __init__(self, clock):
+        super().__init__(LinkSettings())
         self.clock = clock
-        self.connected = False
+        self._connected = False
         self.status_word = 0x0607
         self.silent = False
         self.refuse = {}  # frame address -> exception code
         self.log = []
 
+    @property
+    def connected(self):
+        return self._connected
+
     def connect(self):
-        self.connected = True
+        self._connected = True
 
     def close(self):
-        self.connected = False
+        self._connected = False
 
     def execute(self, unit, transaction):
         self.log.append((self.clock.now, transaction))
@@ -76,7 +84,7 @@ def test_no_write_until_a_command_then_keepalive_at_the_poll_rate():
     assert 9 <= len(drive.writes()) <= 12  # one rewrite a poll at 10 Hz
 
 
-def test_offline_drive_forgets_the_command_and_writes_nothing_after_it_returns():
+def test_a_drive_lost_while_running_gets_the_stop_word_when_it_returns_never_the_run_word():
     bus, drive, clock, events = make_bus()
     run_for(bus, clock, 0.5)
     bus.submit_command('conv', 'start')
@@ -84,11 +92,39 @@ def test_offline_drive_forgets_the_command_and_writes_nothing_after_it_returns()
     drive.silent = True
     run_for(bus, clock, 1.0)
     assert [e.kind for e in events if e.kind == 'offline'] == ['offline']
-    drive.silent = False
+    assert bus.snapshot('conv').motion is Motion.MAY_RUN  # shutdown still stops it
     count = len(drive.writes())
+    drive.silent = False
     run_for(bus, clock, 5.0)
     assert bus.snapshot('conv').online
-    assert len(drive.writes()) == count  # back online: nothing written without a command
+    after = control_words(drive)[count:]
+    assert after and set(after) == {0x043C}  # the run is never resumed
+    assert any(e.kind == 'notice' and 'the run is not resumed' in e.message for e in events)
+
+
+def test_no_write_at_all_for_a_drive_that_was_never_commanded_after_an_outage():
+    bus, drive, clock, _ = make_bus()
+    run_for(bus, clock, 0.5)
+    drive.silent = True
+    run_for(bus, clock, 1.0)
+    drive.silent = False
+    run_for(bus, clock, 3.0)
+    assert bus.snapshot('conv').online and drive.writes() == []
+
+
+def test_a_trip_ends_the_run_word_the_keepalive_writes_a_stop():
+    bus, drive, clock, events = make_bus()
+    run_for(bus, clock, 0.3)
+    bus.submit_command('conv', 'start')
+    run_for(bus, clock, 0.5)
+    drive.status_word = 0x0607 | 1 << 3  # tripped
+    run_for(bus, clock, 0.5)
+    words_sent = control_words(drive)
+    assert words_sent[-1] == 0x043C and 0x047C in words_sent
+    assert bus.snapshot('conv').motion is Motion.IDLE
+    drive.status_word = 0x0607  # reset at the drive's LCP: the drive must not start again
+    run_for(bus, clock, 0.5)
+    assert set(control_words(drive)[len(words_sent):]) == {0x043C}
 
 
 def test_speed_reference_goes_out_with_the_next_cycle():
@@ -97,8 +133,11 @@ def test_speed_reference_goes_out_with_the_next_cycle():
     assert bus.set_speed_reference('conv', 40.0) == 0x1999
     bus.submit_command('conv', 'start')
     run_for(bus, clock, 0.2)
+    writes = len(drive.writes())
     bus.set_speed_reference('conv', -50.0)
     bus.run_once()
+    assert len(drive.writes()) == writes  # no extra traffic: it waits for the next cycle
+    run_for(bus, clock, 0.15)
     references = [words.coils_to_words(list(txn.values))[1] for _, txn in drive.writes()]
     assert references[0] == 0x1999 and references[-1] == 0xE000
     with pytest.raises(CommandRefused, match='nothing sent'):
@@ -217,4 +256,15 @@ def test_a_failed_start_is_not_repeated_the_keepalive_keeps_the_stop():
     sent = control_words(drive)
     assert sent.count(0x047C) == 1  # the start went out once
     assert sent[sent.index(0x047C) + 1:] and set(sent[sent.index(0x047C) + 1:]) == {0x043C}
-    assert bus.snapshot('conv').started_by_bridge  # so a shutdown still stops it
+    assert bus.snapshot('conv').holds_run  # so a shutdown still stops it
+
+
+def test_a_first_start_without_reply_is_followed_by_the_stop_word_never_a_second_start():
+    bus, drive, clock = bus_losing_one_reply()
+    drive.fail_next_write_with = NoResponse('no reply')
+    future = bus.submit_command('conv', 'start')
+    run_for(bus, clock, 1.0)
+    assert 'may or may not have been executed' in str(future.exception())
+    sent = control_words(drive)
+    assert sent[0] == 0x047C and sent.count(0x047C) == 1
+    assert len(sent) > 3 and set(sent[1:]) == {0x043C}

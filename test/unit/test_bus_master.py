@@ -3,10 +3,13 @@
 import re
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
+from drive_bridge.bus.motor import Motion
 from drive_bridge.devices import mcd
-from drive_bridge.devices.base import ReadRegisters, WriteRegister
 from drive_bridge.errors import (
     BadFrame, CommandRefused, DeviceException, LinkDown, NoResponse, TransportError)
+from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
+from drive_bridge.transport.base import Transport
+from drive_bridge.transport.link import LinkSettings
 from fakes import FakeClock, run_for
 import pytest
 
@@ -14,25 +17,30 @@ TIMEOUT_S = 0.5
 RTT_S = 0.02
 
 
-class FakeTransport:
+class FakeTransport(Transport):
     """Devices by unit: a status word to report, or an error to raise."""
 
     def __init__(self, clock):
+        super().__init__(LinkSettings())
         self.clock = clock
-        self.connected = False
+        self._connected = False
         self.link_ok = True
         self.status = {}
         self.failures = {}
         self.write_error = {}
         self.log = []
 
+    @property
+    def connected(self):
+        return self._connected
+
     def connect(self):
         if not self.link_ok:
             raise LinkDown('bus offline: /dev/ttyFAKE not found')
-        self.connected = True
+        self._connected = True
 
     def close(self):
-        self.connected = False
+        self._connected = False
 
     def execute(self, unit, transaction):
         self.log.append((self.clock.now, unit, transaction))
@@ -40,7 +48,7 @@ class FakeTransport:
         if failure is not None:
             self.clock.now += TIMEOUT_S if isinstance(failure, NoResponse) else RTT_S
             if isinstance(failure, LinkDown):
-                self.connected = False
+                self._connected = False
             raise failure
         self.clock.now += RTT_S
         if isinstance(transaction, WriteRegister):
@@ -90,7 +98,7 @@ def test_command_goes_before_waiting_polls_and_is_acknowledged():
     bus.run_once()
     assert transport.log[-1][2] == WriteRegister(1, 1)
     assert future.result(timeout=0) == 'start acknowledged by d1 (address 1)'
-    assert bus.snapshot('d1').started_by_bridge
+    assert bus.snapshot('d1').holds_run
 
 
 def test_dead_device_goes_offline_and_costs_one_timeout_per_backoff():
@@ -138,9 +146,24 @@ def test_single_bad_frame_is_retried_not_offline():
     run_for(bus, clock, 0.5)
     transport.failures[1] = BadFrame('CRC')
     clock.now += 0.2  # the next poll is due
-    bus.run_once()  # every attempt fails: the retries happen within this poll
+    for _ in range(3):  # one attempt a step: commands may go between them
+        bus.run_once()
     assert bus.snapshot('d1').stats['retries'] == '2'
     assert bus.snapshot('d1').stats['errors_bad_frame'] == '3'
+
+
+def test_a_retry_that_succeeds_keeps_the_device_online_and_publishes_its_reading():
+    bus, transport, clock, events = make_bus([1])
+    run_for(bus, clock, 0.5)
+    transport.failures[1] = BadFrame('CRC')
+    clock.now += 0.2
+    bus.run_once()  # the first attempt fails
+    del transport.failures[1]
+    readings = len([e for e in events if e.kind == 'reading'])
+    bus.run_once()  # the retry gets the reply
+    bus.run_once()  # the cycle ends: its reading is decoded
+    assert bus.snapshot('d1').online is True and bus.snapshot('d1').stats['retries'] == '1'
+    assert len([e for e in events if e.kind == 'reading']) == readings + 1
 
 
 def test_lost_link_marks_everything_offline_at_once_and_reconnects():
@@ -193,7 +216,7 @@ def test_device_refusal_is_reported_in_technician_words():
     assert str(error.value) == ('rejected by d1: network control disabled (Hand On mode or '
                                 'par. 3-2); set the starter to Auto On and par. 3-2 Comms in '
                                 'Remote to enable (unsupported command), Modbus error 09')
-    assert not bus.snapshot('d1').started_by_bridge
+    assert not bus.snapshot('d1').holds_run
 
 
 def test_unacknowledged_command_is_not_repeated():
@@ -206,7 +229,8 @@ def test_unacknowledged_command_is_not_repeated():
         future.result(timeout=0)
     writes = [x for x in transport.log if isinstance(x[2], WriteRegister)]
     assert len(writes) == 1
-    assert bus.snapshot('d1').started_by_bridge  # it may have started: stop on shutdown
+    snapshot = bus.snapshot('d1')
+    assert snapshot.holds_run and snapshot.motion is Motion.MAY_RUN  # stop on shutdown
 
 
 def test_parameter_read_and_write_jobs():

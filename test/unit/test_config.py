@@ -50,7 +50,7 @@ def test_int_is_accepted_for_a_double():
     ({'parity': False}, {}, 'write parity: "N" with quotes'),
     ({'parity': 'X'}, {}, "parameter 'parity' = 'X' is invalid: allowed N, E, O"),
     ({'baudrate': 9601}, {}, "parameter 'baudrate' = 9601 is invalid"),
-    ({'protocol': 'ap_ascii'}, {}, "do not fit protocol 'ap_ascii': AP ASCII is 8N1"),
+    ({'protocol': 'ap_ascii'}, {}, "do not fit protocol 'ap_ascii': it is 8N1"),
     ({'protocol': 'ap_ascii', 'parity': 'N', 'timeout': 0.1}, {},
      "parameter 'timeout' = 0.1 is too short for protocol 'ap_ascii'"),
     ({'protocol': 'ap_ascii', 'parity': 'N'}, {'family': 'fc', 'model': 'auto'},
@@ -124,7 +124,8 @@ def test_drive_config_sets_the_reference():
     built = build({}, {'starter': {'family': 'fc', 'address': 1, 'speed_reference': 40.0,
                                    'reference_timeout': 1.5}})
     spec = built.devices[0].make_spec()
-    assert spec.profile.reference_word == 0x1999 and spec.reference_timeout_s == 1.5
+    assert spec.reference_pct == 40.0 and spec.reference_timeout_s == 1.5
+    assert spec.profile.reference_word(spec.reference_pct) == 0x1999
 
 
 def test_aggregator_config_groups_every_drive_bridge_status():

@@ -3,15 +3,18 @@
 import math
 
 from drive_bridge.devices import fc
-from drive_bridge.devices.base import (
-    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
+from drive_bridge.devices.contracts import FixedControl, ParameterOptions, TRIP_CODE_UNKNOWN
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.parameters import decode_value, encode_value, FC_CONVERSION_FACTORS
 from drive_bridge.errors import CommandRefused, DeviceException, ModelMismatch
 from drive_bridge.protocol import crc, fc_control, rtu, words
+from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.requests import (
+    ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.fc_model import FcModel, FcSimConfig, ParameterError
+from fakes import drive_cycle
 import pytest
 
 
@@ -22,18 +25,16 @@ def frame(text):
 # -- manual 004 chapter 5 and the VLT option card manual: frames as vectors -----------
 def test_start_at_40_percent_is_the_manuals_0f_frame():
     profile = DriveProfile(fc.DATA, 'fc51')
-    profile.set_reference(40.0)
-    write = profile.command_plan('start').writes[0]
+    control = FixedControl(reference_word=profile.reference_word(40.0))
+    write = profile.command_plan(Command.START, control).writes[0]
     assert write == WriteCoils(0, words.words_to_coils([0x047C, 0x1999]))
-    encoded = rtu.write_coils_request(1, write.address, list(write.values)).encode()
-    assert encoded == frame('01 0F 00 00 00 20 04 7C 04 99 19 37 43')
+    assert write.frame(1).encode() == frame('01 0F 00 00 00 20 04 7C 04 99 19 37 43')
 
 
 def test_ramp_stop_is_the_manuals_frame():
     profile = DriveProfile(fc.DATA, 'fc51')
-    write = profile.command_plan('stop').writes[0]
-    encoded = rtu.write_coils_request(1, write.address, list(write.values)).encode()
-    assert encoded == frame('01 0F 00 00 00 20 04 3C 04 00 00 89 19')
+    write = profile.command_plan(Command.STOP, FixedControl()).writes[0]
+    assert write.frame(1).encode() == frame('01 0F 00 00 00 20 04 3C 04 00 00 89 19')
 
 
 def test_status_word_0607_from_coils_33_to_48():
@@ -65,7 +66,7 @@ def test_parameter_plans_encode_to_the_manuals_frames():
     write_pnu3 = profile.parameter_plan(3, 1)
     assert write_pnu3.transactions == (WriteCoil(64, False), WriteRegister(0x001D, 1))
     assert rtu.write_register_request(1, 0x1D, 1).encode()[:6] == frame('01 06 00 1D 00 01')
-    write_734 = profile.parameter_plan(734, 655.35, eeprom=True)
+    write_734 = profile.parameter_plan(734, 655.35, ParameterOptions(eeprom=True))
     assert write_734.transactions == (WriteCoil(64, True), WriteRegisters(0x1CAB, (0, 0xFFFF)))
     encoded = rtu.write_registers_request(1, 0x1CAB, [0, 0xFFFF]).encode()
     assert encoded[:11] == frame('01 10 1C AB 00 02 04 00 00 FF FF')
@@ -94,7 +95,8 @@ def test_parameter_values_types_and_conversion():
 # -- control profile ---------------------------------------------------------------------
 def test_command_words():
     assert fc_control.COMMAND_WORDS == {
-        'start': 0x047C, 'stop': 0x043C, 'quick_stop': 0x042C, 'coast_stop': 0x0434}
+        Command.START: 0x047C, Command.STOP: 0x043C, Command.QUICK_STOP: 0x042C,
+        Command.COAST_STOP: 0x0434}
     for word in fc_control.COMMAND_WORDS.values():
         assert word & (1 << fc_control.CTW_DATA_VALID)
     assert fc_control.is_start(0x047C) and not fc_control.is_start(0x043C)
@@ -122,47 +124,72 @@ def status_coils(status_word, actual_word=0):
     return list(words.words_to_coils([status_word, actual_word]))
 
 
-def run_poll(profile, answers):
-    """Run a poll plan against ``answers`` (key -> result) and decode it."""
-    items = profile.poll_plan()
-    results = [answers.get(item.key) for item in items]
-    follow = profile.follow_up_plan(results)
-    results += [answers.get(item.key) for item in follow]
-    return items + follow, profile.decode(results)
+def run_poll(profile, answers, control=None):
+    """Run one poll cycle, answering each request by the readout it reads (``answers``)."""
+    by_request = {ReadCoils(32, 32): 'status'}
+    for key, number in (('drive_type', 1540), ('software_version', 1543)):
+        by_request[DriveProfile._read(fc.DATA.spec(number))] = key
+    for name, spec in profile.readouts.items():
+        by_request[DriveProfile._read(spec)] = name
+    keys = []
+
+    def answer(request):
+        key = by_request.get(request, 'keepalive' if request.writes else '?')
+        keys.append(key)
+        if key not in answers and isinstance(request, ReadRegisters):
+            return [0] * request.count  # a readout the test does not care about
+        return answers.get(key)
+    requests, reading = drive_cycle(profile, answer, control)
+    return list(zip(keys, requests)), reading
 
 
 IDENTITY = {'drive_type': words.text_to_registers('FC-051PK75T4E20H3', 20)[:9],
             'software_version': words.text_to_registers('2.70', 4)}
 
 
-def test_nothing_is_written_before_a_command_then_keepalive_every_poll():
+def test_nothing_is_written_without_a_command_in_force_then_keepalive_every_poll():
     profile = DriveProfile(fc.DATA, 'auto')
     items, reading = run_poll(profile, {'status': status_coils(0x0607), **IDENTITY,
                                         'motor_current': [0, 0]})
-    assert not any(isinstance(item.transaction, (WriteCoils, WriteRegister)) for item in items)
-    assert [item.key for item in items][:2] == ['drive_type', 'software_version']
+    assert not any(request.writes for _, request in items)
+    assert [key for key, _ in items][:2] == ['drive_type', 'software_version']
     assert profile.model == 'fc51' and reading.details['drive_type'] == 'FC-051PK75T4E20H3'
     assert reading.state == 'ready'
-    profile.set_reference(-40.0)
-    plan = profile.command_plan('start')
-    assert profile.control_word is None  # committed only on acknowledgement
-    plan.on_acknowledged()
+    running = FixedControl(Command.START, profile.reference_word(-40.0))
     items, reading = run_poll(profile, {'status': status_coils(0x0E07, 0xF000),
-                                        'motor_current': [0, 150]})
-    assert items[0].key == 'keepalive'
-    assert items[0].transaction == WriteCoils(0, words.words_to_coils([0x047C, 0xE667]))
-    assert ReadCoils(32, 32) == items[1].transaction
+                                        'motor_current': [0, 150]}, running)
+    assert items[0] == ('keepalive', WriteCoils(0, words.words_to_coils([0x047C, 0xE667])))
+    assert items[1] == ('status', ReadCoils(32, 32))
     assert reading.state == 'starting' and reading.motor_current_a == pytest.approx(1.5)
     assert reading.speed_feedback_pct == pytest.approx(-25.0)
-    profile.on_offline()
-    items = profile.poll_plan()
-    assert 'keepalive' not in [item.key for item in items]
+    stopped = FixedControl(Command.STOP)
+    items, _ = run_poll(profile, {'status': status_coils(0x0E07), 'motor_current': [0, 0]},
+                        stopped)
+    assert items[0] == ('keepalive', WriteCoils(0, words.words_to_coils([0x043C, 0])))
+
+
+def test_the_keepalive_is_built_when_it_is_sent():
+    """A command between two steps of a cycle changes what the next write carries."""
+    profile = DriveProfile(fc.DATA, 'fc51')
+    profile._identified = True
+
+    class Switching(FixedControl):
+        steady = Command.START
+    control = Switching(reference_word=0x2000)
+    cycle = profile.poll(control)
+    Switching.steady = Command.STOP  # a stop went out after the cycle began
+    step = next(cycle)
+    assert step.request == WriteCoils(0, words.words_to_coils([0x043C, 0x2000]))
+    assert step.optional and not step.retry
 
 
 def test_readouts_rotate_and_current_is_read_every_poll():
     profile = DriveProfile(fc.DATA, 'fc51')
     profile._identified = True
-    keys = [[item.key for item in profile.poll_plan()] for _ in range(5)]
+    answers = {'status': status_coils(0x0607), 'motor_current': [0, 0], 'frequency': [0],
+               'motor_thermal': [0], 'alarm_word': [0, 0], 'warning_word': [0, 0],
+               'extended_status': [0, 0]}
+    keys = [[key for key, _ in run_poll(profile, answers)[0]] for _ in range(5)]
     assert all(plan[:2] == ['status', 'motor_current'] and len(plan) == 3 for plan in keys)
     assert {plan[2] for plan in keys} == {'frequency', 'motor_thermal', 'alarm_word',
                                           'warning_word', 'extended_status'}
@@ -175,7 +202,7 @@ def test_trip_reads_the_alarm_word_in_the_same_poll():
         'status': status_coils(0x0608 | 0x80), 'motor_current': [0, 0],
         'alarm_word': [0, 1 << 5], 'warning_word': [0, 1 << 5],
         'frequency': [0], 'motor_thermal': [0], 'extended_status': [0, 0]})
-    assert 'alarm_word' in [item.key for item in items]
+    assert 'alarm_word' in [key for key, _ in items]
     assert reading.state == 'tripped'
     assert (reading.trip_code, reading.trip_name) == (13, 'Over current')
     assert reading.fault == 'tripped: Over current'
@@ -183,19 +210,16 @@ def test_trip_reads_the_alarm_word_in_the_same_poll():
     assert reading.details['warnings'] == 'Over current'
 
 
-def test_unknown_alarm_bits_keep_their_bit_number():
+def test_unknown_alarm_bits_keep_their_bit_number_and_no_bit_is_code_unknown():
     profile = DriveProfile(fc.DATA, 'fc51')
     assert profile.trip_from_alarm_word(1 << 18) == (1018, 'alarm word bit 18')
-    assert profile.trip_from_alarm_word(0)[0] == 0
+    assert profile.trip_from_alarm_word(0)[0] == TRIP_CODE_UNKNOWN  # never 0 = not tripped
 
 
 def test_reset_is_a_rising_edge_and_leaves_a_ramp_stop():
     profile = DriveProfile(fc.DATA, 'fc51')
-    profile.command_plan('start').on_acknowledged()
-    plan = profile.command_plan('reset')
+    plan = profile.command_plan(Command.RESET, FixedControl(Command.START))
     assert [words.coils_to_words(list(w.values))[0] for w in plan.writes] == [0x04BC, 0x043C]
-    plan.on_acknowledged()
-    assert profile.control_word == 0x043C  # a reset never restarts the motor
 
 
 def test_local_operation_refuses_commands():
@@ -204,16 +228,14 @@ def test_local_operation_refuses_commands():
     _, reading = run_poll(profile, {'status': status_coils(0x0407), 'motor_current': [0, 0]})
     assert 'local operation' in ' '.join(reading.warnings)
     with pytest.raises(CommandRefused, match='local operation .* nothing sent'):
-        profile.check_command('start', reading)
+        profile.check_command(Command.START, reading)
 
 
 @pytest.mark.parametrize('bad', [math.nan, math.inf, -math.inf, 200.0, -250.0, 'fast'])
-def test_bad_references_are_refused_and_kept_out(bad):
+def test_bad_references_are_refused(bad):
     profile = DriveProfile(fc.DATA, 'fc51')
-    profile.set_reference(40.0)
     with pytest.raises(CommandRefused, match='nothing sent'):
-        profile.set_reference(bad)
-    assert profile.reference_word == 0x1999
+        profile.reference_word(bad)
 
 
 def test_model_mismatch_from_the_fc_type():
@@ -241,8 +263,8 @@ def test_setup_writes_the_control_word_timeout():
 
 def test_exception_texts_with_register_7_detail():
     profile = DriveProfile(fc.DATA, 'fc51')
-    assert profile.detail_plan(4) == ReadRegisters(6, 1)
-    assert profile.detail_plan(2) is None
+    assert profile.detail_request(4) == ReadRegisters(6, 1)
+    assert profile.detail_request(2) is None
     text = profile.explain_exception(4, 17)
     assert text.startswith('data change in the parameter is not possible in the present mode')
     assert text.endswith('Modbus exception 04')

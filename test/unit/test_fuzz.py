@@ -8,13 +8,15 @@ silent. Seeded by hypothesis's database-free default settings, so failures repro
 """
 
 from drive_bridge.config import build_device
-from drive_bridge.devices.base import (
-    AsciiCommand, AsciiRequest, PollItem, ReadCoils, ReadRegisters, WriteCoils, WriteRegister,
-    WriteRegisters)
+from drive_bridge.devices.contracts import FixedControl
 from drive_bridge.errors import ModelMismatch, ProtocolError, TransportError
 from drive_bridge.protocol import ap_ascii, lvsg, rtu
+from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.crc import append_crc, crc_ok
 from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.requests import (
+    AsciiCommand, AsciiRequest, ReadCoils, ReadRegisters, WriteCoils, WriteRegister,
+    WriteRegisters)
 from drive_bridge.protocol.words import registers_to_text
 from drive_bridge.sim.devices import make_device
 from drive_bridge.sim.lvsg_gateway import LvsgGatewaySim, LvsgSlave
@@ -22,6 +24,7 @@ from drive_bridge.sim.mcd_model import McdModel, McdSimConfig
 from drive_bridge.transport.ap_ascii import ApAsciiTransport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
+from fakes import drive_cycle
 from hypothesis import given, HealthCheck, settings, strategies as st
 
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
@@ -229,23 +232,22 @@ def _random_result(transaction, data):
 
 
 @FUZZ
-@given(st.sampled_from(sorted(PROFILES)), st.data())
-def test_profiles_decode_any_register_values_into_a_reading_or_a_typed_error(name, data):
+@given(st.sampled_from(sorted(PROFILES)), st.sampled_from([None, Command.START, Command.STOP]),
+       st.data())
+def test_profiles_decode_any_register_values_into_a_reading_or_a_typed_error(name, steady,
+                                                                             data):
     values, protocol = PROFILES[name]
     profile = build_device(name, values, protocol).make_spec().profile
+    control = FixedControl(steady, writes_allowed=data.draw(st.booleans()))
     for _ in range(3):  # a few polls: identification, rotation, parameter cycling
-        items = profile.poll_plan()
-        results = [_random_result(item.transaction if isinstance(item, PollItem) else item,
-                                  data) for item in items]
-        if hasattr(profile, 'follow_up_plan'):
-            follow = profile.follow_up_plan(results)
-            results += [_random_result(item.transaction, data) for item in follow]
         try:
-            reading = profile.decode(results)
+            requests, reading = drive_cycle(
+                profile, lambda request: _random_result(request, data), control)
         except (ModelMismatch, ProtocolError):
             continue
         assert isinstance(reading.state, str) and 0 <= reading.status_word <= 0xFFFF
         assert 0 <= reading.trip_code <= 0xFFFF
+        assert control.writes_allowed or not any(request.writes for request in requests)
 
 
 # -- simulators --------------------------------------------------------------------------

@@ -1,10 +1,13 @@
 """Unit tests of the LVSG codec (manual 002's tables) and the MCD 200 gateway profile."""
 
-from drive_bridge.devices.base import ReadRegisters, WriteRegister, WriteRegisters
+from drive_bridge.devices.contracts import FixedControl, TRIP_CODE_UNKNOWN
 from drive_bridge.devices.lvsg import LvsgProfile
 from drive_bridge.errors import CommandRefused, ModelMismatch
 from drive_bridge.protocol import lvsg, words
+from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.lvsg import Control
+from drive_bridge.protocol.requests import ReadRegisters, WriteRegister, WriteRegisters
+from fakes import drive_cycle
 import pytest
 
 
@@ -57,75 +60,120 @@ def image(status: bytes, byte_order='big'):
     return words.bytes_to_registers(status, byte_order)
 
 
-def poll(profile, input_bytes, output_bytes=None):
-    items = profile.poll_plan()
-    results = []
-    for item in items:
-        if item.key == 'output':
-            results.append(image(output_bytes if output_bytes is not None else bytes(3)))
-        elif item.key == 'input':
-            results.append(image(input_bytes))
-        else:
-            results.append(None)
-    return items, profile.decode(results)
+def poll(profile, input_bytes, output_bytes=None, control=None):
+    """Run one poll cycle; return [(key, request)] and the reading."""
+    keys = []
+
+    def answer(request):
+        if request == ReadRegisters(profile.output_register, profile.output_registers):
+            keys.append('output')
+            return image(output_bytes if output_bytes is not None else bytes(3))
+        if request == ReadRegisters(profile.input_register, profile.input_registers):
+            keys.append('input')
+            return image(input_bytes)
+        keys.append('write')
+        return None
+    requests, reading = drive_cycle(profile, answer, control)
+    return list(zip(keys, requests)), reading
 
 
 def answer(parameter, value, ready=True, on=False, fault=False, ramping=False):
     return lvsg.encode_status(ready, on, fault, ramping, 0, (parameter, value, False))
 
 
+def written_control(request):
+    values = [request.value] if isinstance(request, WriteRegister) else list(request.values)
+    return Control.decode(words.registers_to_bytes(values, 3))
+
+
 def test_first_poll_reads_the_output_image_back_then_cycles_parameters():
     profile = LvsgProfile('auto', input_register=0, output_register=100)
     items, _ = poll(profile, answer(0, 0))
-    assert items[0].transaction == ReadRegisters(100, 2) and items[0].optional
-    assert items[1].transaction == ReadRegisters(0, 3)
+    assert items == [('output', ReadRegisters(100, 2)), ('write', WriteRegister(101, 1 << 8)),
+                     ('input', ReadRegisters(0, 3))]
     values = {1: (4 << 3) << 8 | 3, 2: 255 << 8 | 1, 3: 2222, 4: 111}
     for parameter in (1, 2, 3, 4):
         items, reading = poll(profile, answer(parameter, values[parameter]))
-        assert items[0].key == 'write'
         # No command yet: only the register with the parameter request, never the control.
-        assert items[0].transaction == WriteRegister(101, parameter << 8)
+        assert items[0] == ('write', WriteRegister(101, parameter << 8))
     assert profile.model == 'mcd201'  # current 2222 and temperature 111 are its placeholders
     assert reading.motor_current_a is None and reading.state == 'ready'
 
 
-def test_adopted_fwd_run_never_starts_a_stopped_starter():
+def test_monitor_only_writes_nothing_not_even_the_parameter_request():
+    profile = LvsgProfile('auto', input_register=0, output_register=100)
+    for _ in range(3):
+        items, _ = poll(profile, answer(0, 0), control=FixedControl(writes_allowed=False))
+        assert not any(request.writes for _, request in items)
+
+
+def test_a_fwd_run_left_in_the_gateway_for_a_stopped_starter_is_written_back_clear():
     profile = LvsgProfile('mcd202', input_register=0, output_register=100)
-    poll(profile, answer(0, 0), output_bytes=bytes([1, 0, 0]))  # Fwd Run left set, not on
-    assert profile.control.fwd_run is False
+    items, reading = poll(profile, answer(0, 0), output_bytes=bytes([1, 0x10, 0]))
+    assert [key for key, _ in items] == ['output', 'write', 'input', 'write']
+    cleared = written_control(items[-1][1])
+    assert not cleared.fwd_run and cleared.quick_stop  # only Fwd Run is cleared
+    assert not reading.fault and profile.image.fwd_run is False
+    items, _ = poll(profile, answer(0, 0))
+    assert [key for key, _ in items] == ['write', 'input']  # the request alone from now on
+
+
+def test_a_fwd_run_left_in_the_gateway_is_a_hazard_when_nothing_may_be_written():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100)
+    items, reading = poll(profile, answer(0, 0), output_bytes=bytes([1, 0, 0]),
+                          control=FixedControl(writes_allowed=False))
+    assert not any(request.writes for _, request in items)
+    assert reading.fault.startswith('HAZARD: the gateway holds Fwd Run for a starter that is '
+                                    'not on')
+
+
+def test_a_running_starter_keeps_the_fwd_run_it_has():
     running = LvsgProfile('mcd202', input_register=0, output_register=100)
-    poll(running, answer(0, 0, ready=False, on=True), output_bytes=bytes([1, 0, 0]))
-    assert running.control.fwd_run is True  # on: keeping Fwd Run keeps it running, no start
+    items, _ = poll(running, answer(0, 0, ready=False, on=True), output_bytes=bytes([1, 0, 0]))
+    assert [key for key, _ in items] == ['output', 'write', 'input']
+    assert items[1][1] == WriteRegister(101, 1 << 8)  # the request only, never the control
+    assert running.image.fwd_run is True
 
 
-def test_a_trip_clears_fwd_run():
+def test_a_trip_asks_for_the_trip_code_next():
     profile = LvsgProfile('mcd202', input_register=0, output_register=100)
     poll(profile, answer(0, 0))
-    profile.command_plan('start').on_acknowledged()
-    assert profile.control.fwd_run
     _, reading = poll(profile, answer(0, 0, ready=False, fault=True))
-    assert profile.control.fwd_run is False
-    assert profile.request == lvsg.PARAMETER_STATE  # the trip code is asked for next
+    assert profile.request == lvsg.PARAMETER_STATE
+    assert reading.trip_code == TRIP_CODE_UNKNOWN  # tripped, code not read yet: never 0
     _, reading = poll(profile, answer(2, 2 << 8 | 6, ready=False, fault=True))
     assert (reading.state, reading.trip_code, reading.trip_name) == ('tripped', 2,
                                                                      'Motor overload')
 
 
+def test_the_keepalive_writes_the_image_of_the_command_in_force():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100)
+    poll(profile, answer(0, 0))
+    items, _ = poll(profile, answer(0, 0, ready=False, on=True),
+                    control=FixedControl(Command.START))
+    assert written_control(items[0][1]).fwd_run
+    items, _ = poll(profile, answer(0, 0, ready=False, on=True),
+                    control=FixedControl(Command.STOP))
+    assert not written_control(items[0][1]).fwd_run
+
+
 def test_commands_as_image_writes():
     profile = LvsgProfile('mcd202', input_register=0, output_register=100, module='basic')
-    poll(profile, lvsg.encode_status(False, True, False, False, 30), output_bytes=bytes([1, 0]))
-    assert profile.poll_plan()[0].transaction == ReadRegisters(0, 1)  # basic: no write yet
-    quick = profile.command_plan('quick_stop').writes
+    items, _ = poll(profile, lvsg.encode_status(False, True, False, False, 30),
+                    output_bytes=bytes([1, 0]))
+    items, _ = poll(profile, lvsg.encode_status(False, True, False, False, 30))
+    assert items == [('input', ReadRegisters(0, 1))]  # basic, no command: nothing written
+    control = FixedControl()
+    quick = profile.command_plan(Command.QUICK_STOP, control).writes
     assert quick == (WriteRegister(100, 0x0110), WriteRegister(100, 0x0010))  # QS, then run off
-    reset = profile.command_plan('reset').writes
+    reset = profile.command_plan(Command.RESET, control).writes
     assert [words.registers_to_bytes([w.value], 2)[0] for w in reset] == [0x08, 0x00]
-    assert profile.command_plan('start').writes == (WriteRegister(100, 0x0100),)
+    assert profile.command_plan(Command.START, control).writes == (WriteRegister(100, 0x0100),)
     with pytest.raises(CommandRefused):
-        profile.command_plan('coast_stop')
-    with pytest.raises(CommandRefused, match='no parameter access'):
-        profile.parameter_plan(1)
+        profile.command_plan(Command.COAST_STOP, control)
+    assert Command.COAST_STOP not in profile.commands
     extended = LvsgProfile('mcd202', input_register=0, output_register=100)
-    assert isinstance(extended.command_plan('start').writes[0], WriteRegisters)
+    assert isinstance(extended.command_plan(Command.START, control).writes[0], WriteRegisters)
 
 
 def test_states_from_status_bits():
@@ -137,11 +185,21 @@ def test_states_from_status_bits():
         _, reading = poll(profile, lvsg.encode_status(ready, on, fault, ramping, 0),
                           bytes(2))
         assert reading.state == state
-    profile.command_plan('start').on_acknowledged()
-    _, reading = poll(profile, lvsg.encode_status(False, True, False, True, 40))
+    _, reading = poll(profile, lvsg.encode_status(False, True, False, True, 40),
+                      control=FixedControl(Command.START))
     assert reading.state == 'starting' and reading.details['motor_current_pct_flc'] == '127'
+    _, reading = poll(profile, lvsg.encode_status(False, True, False, True, 40),
+                      control=FixedControl(Command.STOP))
+    assert reading.state == 'stopping'
     _, reading = poll(profile, lvsg.encode_status(False, False, True, False, 0))
     assert reading.trip_name.startswith('tripped (trip code not known')
+
+
+def test_a_starter_started_by_a_fwd_run_it_kept_reads_starting_not_stopping():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100, module='basic')
+    _, reading = poll(profile, lvsg.encode_status(False, True, False, True, 40),
+                      output_bytes=bytes([1, 0]))
+    assert reading.state == 'starting'
 
 
 def test_wrong_product_type_is_a_model_mismatch():
@@ -149,19 +207,3 @@ def test_wrong_product_type_is_a_model_mismatch():
     poll(profile, answer(0, 0))
     with pytest.raises(ModelMismatch, match='product type 7'):
         poll(profile, answer(1, (7 << 3) << 8))
-
-
-def test_a_failed_stop_clears_fwd_run_in_the_rewritten_image_a_failed_start_does_not_set_it():
-    profile = LvsgProfile('mcd202', input_register=0, output_register=100)
-    poll(profile, answer(0, 0))
-    profile.command_plan('start').on_acknowledged()
-    poll(profile, answer(0, 0, ready=False, on=True))
-    for command in ('stop', 'quick_stop', 'reset'):
-        profile.command_plan('start').on_acknowledged()
-        profile.command_plan(command).on_failed()  # refused, or no reply: it may have run
-        assert profile.control.fwd_run is False, command
-        items, _ = poll(profile, answer(0, 0, ready=False, on=True))
-        written = words.registers_to_bytes(list(items[0].transaction.values), 3)
-        assert written[0] & 0x01 == 0  # the rewritten image carries no Fwd Run
-    profile.command_plan('start').on_failed()
-    assert profile.control.fwd_run is False  # a failed start is not repeated

@@ -1,9 +1,12 @@
 """Unit tests of the MCD profile (decode, commands, tables) and the MCD behaviour model."""
 
 from drive_bridge.devices import mcd
-from drive_bridge.devices.base import ReadRegisters, WriteRegister
+from drive_bridge.devices.contracts import FixedControl
 from drive_bridge.errors import CommandRefused, ModelMismatch, ProtocolError
+from drive_bridge.protocol.commands import Command
+from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.sim.mcd_model import McdModel, McdSimConfig, ModuleError
+from fakes import drive_cycle
 import pytest
 
 MCD500_PRODUCT = (7 << 3) | 1
@@ -14,8 +17,9 @@ def status_block(status=0x43, trip=255, current=80, temperature=40, product=MCD5
     return [[status, trip, current, temperature, product, protocol]]
 
 
-def test_poll_plan_is_one_read_of_40003_to_40008():
-    assert mcd.McdProfile().poll_plan() == [ReadRegisters(address=2, count=6)]
+def test_poll_is_one_read_of_40003_to_40008():
+    requests, _ = drive_cycle(mcd.McdProfile(), [status_block()[0]])
+    assert requests == [ReadRegisters(address=2, count=6)]
 
 
 def test_register_addresses_are_number_minus_one():
@@ -98,15 +102,17 @@ def test_wrong_register_count_is_a_protocol_error():
 
 
 @pytest.mark.parametrize('command, value', [
-    ('start', 1), ('stop', 2), ('reset', 3), ('quick_stop', 4), ('forced_comms_trip', 5)])
+    (Command.START, 1), (Command.STOP, 2), (Command.RESET, 3), (Command.QUICK_STOP, 4),
+    (Command.FORCED_COMMS_TRIP, 5)])
 def test_commands_write_40002(command, value):
-    plan = mcd.McdProfile().command_plan(command)
+    plan = mcd.McdProfile().command_plan(command, FixedControl())
     assert plan.writes == (WriteRegister(1, value),)
 
 
 def test_coast_stop_is_not_an_mcd_command():
+    assert Command.COAST_STOP not in mcd.McdProfile().commands
     with pytest.raises(CommandRefused, match='no coast_stop command'):
-        mcd.McdProfile().command_plan('coast_stop')
+        mcd.McdProfile().command_plan(Command.COAST_STOP, FixedControl())
 
 
 def test_parameter_addresses():

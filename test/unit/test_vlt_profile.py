@@ -2,11 +2,13 @@
 
 from drive_bridge import config
 from drive_bridge.devices import vlt
-from drive_bridge.devices.base import ReadRegisters, WriteCoil, WriteRegister, WriteRegisters
+from drive_bridge.devices.contracts import FixedControl, ParameterOptions
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.parameters import decode_value
 from drive_bridge.errors import CommandRefused, ConfigError
 from drive_bridge.protocol import crc, rtu, words
+from drive_bridge.protocol.commands import Command
+from drive_bridge.protocol.requests import ReadRegisters, WriteCoil, WriteRegister
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.fc_model import FcModel, FcSimConfig
 import pytest
@@ -16,16 +18,9 @@ def frame(text):
     return bytes.fromhex(text)
 
 
-def encode(unit, transaction):
-    """Return the RTU request of one transaction, CRC included."""
-    if isinstance(transaction, WriteRegister):
-        return rtu.write_register_request(unit, transaction.address, transaction.value).encode()
-    if isinstance(transaction, WriteRegisters):
-        return rtu.write_registers_request(unit, transaction.address,
-                                           list(transaction.values)).encode()
-    if isinstance(transaction, ReadRegisters):
-        return rtu.read_registers_request(unit, transaction.address, transaction.count).encode()
-    return rtu.write_coils_request(unit, transaction.address, list(transaction.values)).encode()
+def encode(unit, request):
+    """Return the RTU request frame of one request, CRC included."""
+    return request.frame(unit).encode()
 
 
 @pytest.fixture
@@ -34,8 +29,8 @@ def profile():
 
 
 def test_example_1_start_at_40_percent_and_its_reply(profile):
-    profile.set_reference(40.0)
-    request = encode(1, profile.command_plan('start').writes[0])
+    control = FixedControl(reference_word=profile.reference_word(40.0))
+    request = encode(1, profile.command_plan(Command.START, control).writes[0])
     assert request == frame('01 0F 00 00 00 20 04 7C 04 99 19 37 43')
     device = FcSimDevice(FcModel(FcSimConfig(model='vlt6000')))
     reply = device.handle(rtu.decode_request(request).frame, 0.0)
@@ -43,7 +38,7 @@ def test_example_1_start_at_40_percent_and_its_reply(profile):
 
 
 def test_example_2_ramp_stop(profile):
-    assert encode(1, profile.command_plan('stop').writes[0]) == \
+    assert encode(1, profile.command_plan(Command.STOP, FixedControl()).writes[0]) == \
         frame('01 0F 00 00 00 20 04 3C 04 00 00 89 19')
 
 
@@ -52,7 +47,8 @@ def test_example_3_coast_stop():
     # bridge's coast (0x0434) clears only the coast bit and leaves relays and set-ups alone.
     manual = rtu.write_coils_request(1, 0, list(words.words_to_coils([0x2C20, 0]))).encode()
     assert manual[:11] == frame('01 0F 00 00 00 20 04 20 2C 00 00') and crc.crc_ok(manual)
-    coast = DriveProfile(vlt.DATA, 'vlt5000').command_plan('coast_stop').writes[0]
+    coast = DriveProfile(vlt.DATA, 'vlt5000').command_plan(Command.COAST_STOP,
+                                                           FixedControl()).writes[0]
     assert words.coils_to_words(list(coast.values))[0] == 0x0434
     assert not 0x0434 & (1 << 3)  # bit 3 = 0: coast
 
@@ -100,7 +96,7 @@ def test_readouts_per_model_and_override():
 
 
 def test_exception_codes_of_the_option_card(profile):
-    assert profile.detail_plan(4) is None  # no register 7 on the option card
+    assert profile.detail_request(4) is None  # no register 7 on the option card
     assert profile.explain_exception(4) == \
         'the parameter is not of the array type, Modbus exception 04'
     assert profile.explain_exception(131).startswith('data change is not possible because')
@@ -120,7 +116,7 @@ def test_comms_timeouts_go_to_registers_2_and_3_in_10_ms_units():
 
 
 def test_index_register_is_ind(profile):
-    plan = profile.parameter_plan(999, data_type='uint16', index=3)
+    plan = profile.parameter_plan(999, options=ParameterOptions(data_type='uint16', index=3))
     assert plan.transactions[0] == WriteRegister(0, 3)
 
 
@@ -128,10 +124,9 @@ def test_index_register_is_ind(profile):
     ({}, "'fan.model' = 'auto' is invalid for family vlt (this family cannot report its "
          'model: name it): allowed vlt5000, vlt6000'),
     ({'model': 'vlt6000', 'comms_timeout_function': 2},
-     "device 'fan': comms_timeout_function applies to drives with a control word timeout "
-     'function parameter'),
+     "parameter 'fan.comms_timeout_function' applies to families fc only, not vlt"),
     ({'family': 'fc', 'model': 'fc51', 'drive_link_timeout': 1.0},
-     "device 'fan': drive_link_timeout applies to the VLT option card (register 3)"),
+     "parameter 'fan.drive_link_timeout' applies to families vlt only, not fc"),
 ])
 def test_vlt_configuration_errors(device, message):
     with pytest.raises(ConfigError) as error:

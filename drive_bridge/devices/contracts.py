@@ -1,0 +1,282 @@
+"""
+The contracts between a device family and the bus: what a profile is, and what it can do.
+
+A *profile* (:class:`DeviceProfile`) knows one device's register map or telegrams: how to
+read it (a poll cycle), which writes carry out a command, and how to explain the device's
+errors. It keeps no command state of its own: which command is in force is decided by the
+bus's motor-state owner (:mod:`drive_bridge.bus.motor`), which hands the profile a read-only
+:class:`ControlView` whenever the profile builds a write.
+
+A poll cycle is a generator (:data:`PollCycle`): it yields one :class:`PollStep` at a time,
+receives the step's result, and returns the decoded :class:`DeviceReading`. The bus asks for
+the next step only when it is about to send it, so a write built from the control view (the
+drives' keepalive) always carries what is in force at that moment, even when a command was
+sent between two steps of the same cycle.
+
+Optional capabilities are abstract classes that a profile class inherits explicitly; the bus
+asks ``isinstance(profile, Capability)`` and never probes attributes:
+
+- :class:`CyclicControl`: once a command is in force, the device is driven by a control
+  image the bridge rewrites every poll (drives' control word, the LVSG output image);
+- :class:`SpeedReference`: the device takes a speed reference in percent (FC scaling);
+- :class:`ParameterAccess`: parameters by number (read, write, backup);
+- :class:`SetupWrites`: settings written each time the device comes online.
+"""
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import (
+    Any, Callable, Dict, FrozenSet, Generator, List, Mapping, Optional, Sequence, Tuple)
+
+from drive_bridge.protocol.commands import Command
+from drive_bridge.protocol.requests import Request
+
+# State names of the ROS contract (`<name>/state`).
+STATES = (
+    'ready', 'starting', 'running', 'stopping', 'restart_delay', 'tripped', 'program_mode',
+    'jog_forward', 'jog_reverse', 'not_ready', 'offline', 'unknown',
+)
+# The contract's trip code for "tripped, but the device did not say why".
+TRIP_CODE_UNKNOWN = 65535
+# The optional fields of a reading, each published on its own topic where a device has it.
+READING_FIELDS = ('motor_current', 'motor_temperature', 'speed_feedback', 'alarm_word',
+                  'warning_word')
+
+
+@dataclass
+class DeviceReading:
+    """
+    One decoded poll of a device, in the units of the ROS contract.
+
+    Optional fields are None where the device or model does not report them. ``details``
+    carries every decoded field as text for /diagnostics; ``warnings`` lists conditions that
+    make the diagnostics level WARN; ``fault`` (tripped, or a hazard) makes it ERROR.
+    ``trip_code`` is 0 when not tripped and :data:`TRIP_CODE_UNKNOWN` when tripped for a
+    reason the device did not report.
+    """
+
+    state: str
+    status_word: int
+    trip_code: int = 0
+    trip_name: str = ''
+    motor_current_a: Optional[float] = None
+    motor_temperature_pct: Optional[float] = None
+    speed_feedback_pct: Optional[float] = None
+    alarm_word: Optional[int] = None
+    warning_word: Optional[int] = None
+    details: Dict[str, str] = field(default_factory=dict)
+    warnings: List[str] = field(default_factory=list)
+    fault: str = ''
+
+    @property
+    def tripped(self) -> bool:
+        """Return whether the device reports a trip."""
+        return self.state == 'tripped'
+
+
+@dataclass(frozen=True)
+class PollStep:
+    """
+    One transaction of a poll cycle.
+
+    ``optional``: a refusal by the device (and, for a write, any failure) is handed back to
+    the cycle as the result (the error object) instead of failing the poll. ``retry``: the
+    bus may repeat the request after a lost or garbled reply (reads; never a write).
+    """
+
+    request: Request
+    optional: bool = False
+    retry: bool = True
+
+
+# A poll cycle: yields steps, receives each step's result, returns the reading.
+PollCycle = Generator[PollStep, Any, DeviceReading]
+
+
+@dataclass(frozen=True)
+class CommandPlan:
+    """The writes that carry out one command, in order (sent as one job)."""
+
+    command: Command
+    writes: Tuple[Request, ...]
+
+
+@dataclass(frozen=True)
+class ParameterOptions:
+    """How to access a parameter the tables do not describe, or how to store a write."""
+
+    data_type: Optional[str] = None
+    conversion: Optional[int] = None
+    index: Optional[int] = None
+    eeprom: bool = False
+
+
+@dataclass(frozen=True)
+class ParameterPlan:
+    """The transactions of one parameter access and how to turn their results into a value."""
+
+    label: str
+    transactions: Tuple[Request, ...]
+    decode: Callable[[list], Any]
+
+
+class ControlView(ABC):
+    """What the motor-state owner has in force for one device, read-only, for the profile."""
+
+    @property
+    @abstractmethod
+    def steady(self) -> Optional[Command]:
+        """
+        Return the command the cyclic image carries now (None: write no control data).
+
+        Always None while writes are not allowed (monitor only).
+        """
+
+    @property
+    @abstractmethod
+    def reference_word(self) -> int:
+        """Return the speed reference word in force (drives; 0 otherwise)."""
+
+    @property
+    @abstractmethod
+    def writes_allowed(self) -> bool:
+        """Return whether anything may be written to the device (False: monitor only)."""
+
+
+class FixedControl(ControlView):
+    """A control view with fixed values: for tools and tests that run a profile directly."""
+
+    def __init__(self, steady: Optional[Command] = None, reference_word: int = 0,
+                 writes_allowed: bool = True):
+        self._steady = steady
+        self._reference_word = reference_word
+        self._writes_allowed = writes_allowed
+
+    @property
+    def writes_allowed(self) -> bool:
+        """Return the fixed permission."""
+        return self._writes_allowed
+
+    @property
+    def steady(self) -> Optional[Command]:
+        """Return the fixed steady command (None when writes are not allowed)."""
+        return self._steady if self._writes_allowed else None
+
+    @property
+    def reference_word(self) -> int:
+        """Return the fixed reference word."""
+        return self._reference_word
+
+
+class DeviceProfile(ABC):
+    """
+    One device's map, poll cycle, commands and error texts; see the module docstring.
+
+    ``commands``: the commands the device takes (one service each). ``reading_fields``: the
+    optional reading fields it can report (one topic each, :data:`READING_FIELDS`).
+    """
+
+    family: str = ''
+    commands: FrozenSet[Command] = frozenset()
+
+    def __init__(self, configured_model: str):
+        self.configured_model = configured_model
+        self.resolved_model: Optional[str] = None if configured_model == 'auto' \
+            else configured_model
+
+    @property
+    def model(self) -> str:
+        """Return the model in use: as read from the device, else as configured."""
+        return self.resolved_model or self.configured_model
+
+    @property
+    def reading_fields(self) -> FrozenSet[str]:
+        """Return the optional reading fields this device reports (its topics)."""
+        return frozenset()
+
+    @abstractmethod
+    def poll(self, control: ControlView) -> PollCycle:
+        """Return a new poll cycle (a generator, see the module docstring)."""
+
+    @abstractmethod
+    def command_plan(self, command: Command, control: ControlView) -> CommandPlan:
+        """Return the writes of ``command``; raise CommandRefused if the device has none."""
+
+    def check_command(self, command: Command, reading: Optional[DeviceReading]) -> None:
+        """Raise CommandRefused for a command the device would ignore now (nothing sent)."""
+
+    @abstractmethod
+    def explain_exception(self, code: int, detail: Optional[int] = None) -> str:
+        """Return technician text for a refusal (exception) code of this device."""
+
+    def detail_request(self, code: int) -> Optional[Request]:
+        """Return a read that explains refusal ``code`` further (FC: register 7), or None."""
+        return None
+
+    def on_offline(self) -> None:
+        """Forget what was read: the device is offline (it may come back as another one)."""
+
+    def describe_control(self, control: ControlView) -> str:
+        """Return what the cyclic image carries, in words, for /diagnostics."""
+        return 'none'
+
+
+class CyclicControl(ABC):
+    """
+    Capability: once a command is in force, the bridge rewrites a control image every poll.
+
+    The image's run bit is the motor-state owner's to decide (``ControlView.steady``): the
+    profile writes it as the view says, and nothing while the view's steady command is None.
+    """
+
+
+class SpeedReference(ABC):
+    """Capability: the device takes a speed reference in percent (FC scaling)."""
+
+    @abstractmethod
+    def reference_word(self, percent: float) -> int:
+        """Return the 16-bit word of ``percent``; raise CommandRefused if it is not valid."""
+
+
+class ParameterAccess(ABC):
+    """Capability: parameters by number."""
+
+    @abstractmethod
+    def parameter_plan(self, number: int, value: Any = None,
+                       options: ParameterOptions = ParameterOptions()) -> ParameterPlan:
+        """Return the read (``value`` None) or write of parameter ``number``."""
+
+    def parameter_numbers(self) -> Sequence[int]:
+        """Return the numbers of the settings a backup saves, in order."""
+        return ()
+
+
+class SetupWrites(ABC):
+    """Capability: settings written each time the device comes online (not monitor-only)."""
+
+    @abstractmethod
+    def setup_plan(self) -> Sequence[Request]:
+        """Return the set-up writes (may be empty)."""
+
+
+@dataclass(frozen=True)
+class Family:
+    """
+    One device family as configuration, node, CLI and simulators see it.
+
+    ``settings``: the device settings this family takes beyond the common ones.
+    ``make_profile(model, protocol, options)`` builds a profile from validated options (the
+    common and the family settings by name). ``make_simulator(model, now_s, **settings)``
+    builds a simulated device of one of ``sim_models``.
+    """
+
+    name: str
+    description: str
+    models: Tuple[str, ...]
+    address_range: Tuple[int, int]
+    protocols: Tuple[str, ...]
+    settings: Tuple[Any, ...]
+    make_profile: Callable[[str, str, Mapping[str, Any]], DeviceProfile]
+    sim_models: Tuple[str, ...] = ()
+    make_simulator: Optional[Callable[..., Any]] = None
+    reference: bool = False  # takes a speed reference (drives)

@@ -1,0 +1,105 @@
+"""
+The protocol table: every bus protocol, its link, framing, request types and transport.
+
+This is the one place that names the protocols. Configuration (which protocols exist, their
+defaults and their own settings), the link settings (serial or TCP, framing), the node and
+the tools all read it. A new protocol is a codec in :mod:`drive_bridge.protocol`, a
+transport module here, and one entry in :data:`PROTOCOLS`.
+"""
+
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, Mapping, Optional, Tuple
+
+from drive_bridge.protocol import ap_ascii, rtu
+from drive_bridge.protocol.requests import AP_ASCII_REQUESTS, MODBUS_REQUESTS
+from drive_bridge.settings import Setting
+
+SERIAL_ENGINES = ('native', 'pymodbus')
+
+
+@dataclass(frozen=True)
+class ProtocolSpec:
+    """
+    One bus protocol.
+
+    ``link``: 'serial' (a port) or 'tcp' (a gateway). ``fixed_framing``: (parity, stop bits)
+    the protocol always uses, whatever is configured (AP ASCII: 8N1). ``default_stopbits``
+    gives the stop bits for ``stopbits: 0`` from the parity; ``frame_gap_s`` the silence a
+    master keeps between transactions (baud rate, parity, stop bits). ``settings``: the bus
+    settings only this protocol takes. ``make_transport(link, options)`` builds the
+    transport from the link settings and the validated options (bus settings by name).
+    """
+
+    name: str
+    description: str
+    link: str
+    requests: Tuple[type, ...]
+    make_transport: Callable[[Any, Mapping[str, Any]], Any]
+    fixed_framing: Optional[Tuple[str, int]] = None
+    default_stopbits: Callable[[str], int] = rtu.default_stopbits
+    frame_gap_s: Callable[[int, str, int], float] = rtu.frame_gap_s
+    min_timeout_s: float = 0.02
+    settings: Tuple[Setting, ...] = ()
+
+    @property
+    def is_serial(self) -> bool:
+        """Return whether the protocol runs on a local serial port."""
+        return self.link == 'serial'
+
+
+def _modbus_rtu(link, options: Mapping[str, Any]):
+    if options.get('serial_engine', 'native') == 'pymodbus':
+        from drive_bridge.transport.modbus import ModbusTransport
+        return ModbusTransport(link)
+    from drive_bridge.transport.serial_rtu import RtuSerialTransport
+    return RtuSerialTransport(link)
+
+
+def _pymodbus(link, options: Mapping[str, Any]):
+    from drive_bridge.transport.modbus import ModbusTransport
+    return ModbusTransport(link)
+
+
+def _ap_ascii(link, options: Mapping[str, Any]):
+    from drive_bridge.transport.ap_ascii import ApAsciiTransport
+    return ApAsciiTransport(link, options.get('ap_nak_retries', 2),
+                            options.get('ap_address_lrc_eot', True))
+
+
+PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
+    ProtocolSpec(
+        'modbus_rtu', 'Modbus RTU on a serial port', 'serial', MODBUS_REQUESTS, _modbus_rtu,
+        settings=(Setting('serial_engine', str, 'native',
+                          'Modbus RTU on a serial port: native (reads replies by their '
+                          'length) or pymodbus', choices=SERIAL_ENGINES),)),
+    ProtocolSpec(
+        'ap_ascii', 'MCD AP ASCII on a serial port (8N1)', 'serial', AP_ASCII_REQUESTS,
+        _ap_ascii, fixed_framing=('N', 1), default_stopbits=lambda parity: 1,
+        min_timeout_s=ap_ascii.MIN_TIMEOUT_S,
+        settings=(
+            Setting('ap_nak_retries', int, 2,
+                    'AP ASCII: how often an exchange answered with NAK (bad LRC, not '
+                    'executed) is restarted from the address', low=0, high=10),
+            Setting('ap_address_lrc_eot', bool, True,
+                    'AP ASCII: the address fragment LRC includes EOT (the manual leaves it '
+                    'open)'))),
+    ProtocolSpec('modbus_tcp', 'Modbus TCP gateway', 'tcp', MODBUS_REQUESTS, _pymodbus,
+                 frame_gap_s=lambda baudrate, parity, stopbits: 0.0),
+    ProtocolSpec('rtu_over_tcp', 'transparent serial-to-Ethernet gateway (Modbus RTU frames)',
+                 'tcp', MODBUS_REQUESTS, _pymodbus,
+                 frame_gap_s=lambda baudrate, parity, stopbits: 0.0),
+)}
+
+
+def protocol_settings() -> Tuple[Setting, ...]:
+    """Return every protocol's own bus settings (each name once)."""
+    seen: Dict[str, Setting] = {}
+    for spec in PROTOCOLS.values():
+        for setting in spec.settings:
+            seen.setdefault(setting.name, setting)
+    return tuple(seen.values())
+
+
+def make_transport(link, options: Optional[Mapping[str, Any]] = None):
+    """Return the transport of ``link`` (LinkSettings) with the protocol's ``options``."""
+    return PROTOCOLS[link.protocol].make_transport(link, options or {})
