@@ -102,7 +102,7 @@ FC51_TABLE: Tuple[ParameterSpec, ...] = (
     _p(303, 'Maximum Reference', 'int32', -3, M4_QM1 + ', ' + M4_QM2, minimum=-4999,
        maximum=4999, default=50.0),
     _p(310, 'Preset Reference', 'int16', -2,
-       M4_QM2 + '; manual 004 section 5.6.1: four values [0]-[3] chosen by control word bits '
+       M4_QM2 + '; manual 004 section 5.6.2: four values [0]-[3] chosen by control word bits '
        '00/01', minimum=-100.0, maximum=100.0, unit='%', elements=4),
     _p(341, 'Ramp 1 Ramp-up Time', 'uint32', -2, M4_QM1 + ' (0 Hz to 1-23 Motor Frequency)',
        minimum=0.05, maximum=3600.0, unit='s', default=3.0),
@@ -110,7 +110,7 @@ FC51_TABLE: Tuple[ParameterSpec, ...] = (
        M4_QM1 + '; manual 004 example 5.5.4 reads it as two registers (32 bits)',
        inferred=('conversion',), minimum=0.05, maximum=3600.0, unit='s', default=3.0),
     _p(381, 'Quick Stop Ramp Time', 'uint32', -2,
-       'manual 004 section 5.6.1 (control word bit 04); type and index as in fc.py'),
+       'manual 004 section 5.6.2 (control word bit 04); type and index as in fc.py'),
     # -- 4-** Limits/Warnings
     _p(412, 'Motor Speed Low Limit [Hz]', 'uint16', -1, M4_QM2, minimum=0.0, maximum=400.0,
        unit='Hz'),
@@ -183,26 +183,26 @@ FC51_PARAMETERS: Dict[int, ParameterSpec] = {spec.number: spec for spec in FC51_
 
 # Named by manual 004, nothing else known: number -> (name as the manual writes it, where).
 FC51_NAMED: Dict[int, Tuple[str, str]] = {
-    10: ('Active Set-up', 'manual 004 section 5.6.1, control word bit 13 ("Multi set-ups")'),
+    10: ('Active Set-up', 'manual 004 section 5.6.2, control word bit 13 ("Multi set-ups")'),
     190: ('Motor Thermal Protection', 'manual 004, motor overload note (option "ETR trip")'),
-    201: ('DC Brake Current', 'manual 004 section 5.6.1, control word bit 02'),
-    202: ('DC Braking Time', 'manual 004 section 5.6.1, control word bit 02'),
-    319: ('Jog Speed', 'manual 004 section 5.6.1, control word bit 08'),
+    201: ('DC Brake Current', 'manual 004 section 5.6.2, control word bit 02'),
+    202: ('DC Braking Time', 'manual 004 section 5.6.2, control word bit 02'),
+    319: ('Jog Speed', 'manual 004 section 5.6.2, control word bit 08'),
     416: ('torque limit (see 3-41)', 'manual 004 section 4.4.1, par. 3-41'),
     417: ('regenerative torque limit (see 3-42)', 'manual 004 section 4.4.1, par. 3-42'),
-    540: ('Function Relay', 'manual 004 section 5.6.1, control word bit 11'),
+    540: ('Function Relay', 'manual 004 section 5.6.2, control word bit 11'),
     619: ('(set to match S200 switch 4)', 'manual 004 section 3.5, table 3.5'),
     730: ('Process PI Normal/Inverse', M4_QM2 + ' ("most PI controllers are Normal")'),
     731: ('Process PI Anti Windup', M4_QM2 + ' ("leave Enabled normally")'),
     833: ('Parity / Stop Bits', 'manual 004 section 5.2.1'),
     835: ('Minimum Response Delay', 'protocols.md "pymodbus" (RS-485 practice)'),
-    850: ('Coasting Select', 'manual 004 section 5.6.1, control word bit 03'),
-    853: ('Start Select', 'manual 004 section 5.6.1, control word bit 06'),
-    854: ('Reversing Select', 'manual 004 section 5.6.1, control word bit 15'),
-    855: ('Set-up Select', 'manual 004 section 5.6.1, control word bit 13'),
-    856: ('Preset Reference Select', 'manual 004 section 5.6.1, control word bits 00/01'),
+    850: ('Coasting Select', 'manual 004 section 5.6.2, control word bit 03'),
+    853: ('Start Select', 'manual 004 section 5.6.2, control word bit 06'),
+    854: ('Reversing Select', 'manual 004 section 5.6.2, control word bit 15'),
+    855: ('Set-up Select', 'manual 004 section 5.6.2, control word bit 13'),
+    856: ('Preset Reference Select', 'manual 004 section 5.6.2, control word bits 00/01'),
 }
-# Manual 004 section 5.6.1 refers to these ranges without naming each parameter.
+# Manual 004 section 5.6.2 refers to these ranges without naming each parameter.
 FC51_NAMED_RANGES: Tuple[Tuple[int, int, str], ...] = (
     (340, 347, 'Ramp 1 (control word bit 09 = 0)'),
     (350, 357, 'Ramp 2 (control word bit 09 = 1)'),
