@@ -8,9 +8,10 @@ register, 32-bit values in two (high word first), text in up to 10 registers (20
 and a conversion index that scales the whole number on the bus to the value shown.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 import math
-from typing import Dict, Tuple, Union
+from types import MappingProxyType
+from typing import Dict, Iterable, List, Mapping, Optional, Tuple, Union
 
 from drive_bridge.errors import CommandRefused
 from drive_bridge.protocol.words import (
@@ -44,7 +45,14 @@ Value = Union[int, float, str]
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """One drive parameter: number, name, type, conversion index and where it is from."""
+    """
+    One drive parameter: number, name, type, conversion index and where it is from.
+
+    The fields after ``characters`` describe the parameter for commissioning (get, set,
+    backup, restore); every one is optional so that a bare ``ParameterSpec(number, name,
+    data_type, conversion)`` still works. Limits are in display units (after conversion).
+    ``inferred`` names the fields that no source states (see the table modules).
+    """
 
     number: int
     name: str
@@ -52,10 +60,29 @@ class ParameterSpec:
     conversion: int = 0
     source: str = ''
     characters: int = MAX_TEXT_CHARACTERS  # text parameters only
+    minimum: Optional[float] = None  # display units
+    maximum: Optional[float] = None
+    options: Optional[Mapping[int, str]] = field(default=None, hash=False)  # value -> name
+    options_partial: bool = False  # True: the known options only, others may be valid
+    unit: str = ''
+    change_running: Optional[bool] = None  # may be changed while the motor runs (None: unknown)
+    setting: Optional[bool] = None  # True: a setting (backed up); False: readout or process data
+    default: Optional[Union[int, float, str]] = None
+    elements: int = 0  # array parameters: how many indexes (0: not an array)
+    label: str = ''  # the manual's own designation when it is not the number (FC: 16-14)
+    inferred: Tuple[str, ...] = ()  # names of the fields no source states
 
     def __post_init__(self):
         if self.data_type not in DATA_TYPES and self.data_type != TEXT:
             raise ValueError(f'unknown data type {self.data_type!r}')
+        if self.options is not None:
+            object.__setattr__(self, 'options', MappingProxyType(dict(self.options)))
+        if (self.minimum is not None and self.maximum is not None
+                and self.minimum > self.maximum):
+            raise ValueError(f'{self.name}: minimum {self.minimum} > maximum {self.maximum}')
+        unknown = set(self.inferred) - SPEC_FIELDS
+        if unknown:
+            raise ValueError(f'{self.name}: inferred names unknown fields {sorted(unknown)}')
 
     @property
     def address(self) -> int:
@@ -68,6 +95,14 @@ class ParameterSpec:
         if self.data_type == TEXT:
             return (self.characters + 1) // 2
         return DATA_TYPES[self.data_type][0]
+
+    @property
+    def title(self) -> str:
+        """Return 'name (par. label)' for messages."""
+        return f'{self.name} (par. {self.label or self.number})'
+
+
+SPEC_FIELDS = frozenset(spec_field.name for spec_field in fields(ParameterSpec))
 
 
 def parameter_address(number: int) -> int:
@@ -107,9 +142,17 @@ def encode_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -
             return text_to_registers(value, len(value) + len(value) % 2)
         except (ValueError, UnicodeEncodeError) as error:
             raise CommandRefused(f'{spec.name}: {error}') from None
-    if isinstance(value, (str, bool)):
+    raw = raw_number(spec, value, factors)
+    if DATA_TYPES[spec.data_type][0] == 2:
+        return list(split_u32(raw & 0xFFFFFFFF))
+    return [raw & 0xFFFF]
+
+
+def raw_number(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -> int:
+    """Return the whole number on the bus for ``value`` (display units); raise CommandRefused."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise CommandRefused(f'{spec.name} takes a number, not {value!r}')
-    count, _, minimum, maximum = DATA_TYPES[spec.data_type]
+    _, _, minimum, maximum = DATA_TYPES[spec.data_type]
     factor = conversion_factor(spec, factors)
     if not math.isfinite(float(value)):
         raise CommandRefused(f'{spec.name}: {value} is not a finite number')
@@ -120,9 +163,7 @@ def encode_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -
         raise CommandRefused(
             f'{spec.name}: {value} is out of range for {spec.data_type} with conversion '
             f'index {spec.conversion} ({minimum * factor:g} to {maximum * factor:g})')
-    if count == 2:
-        return list(split_u32(raw & 0xFFFFFFFF))
-    return [raw & 0xFFFF]
+    return raw
 
 
 def conversion_factor(spec: ParameterSpec, factors: Dict[int, float]) -> float:
@@ -132,3 +173,67 @@ def conversion_factor(spec: ParameterSpec, factors: Dict[int, float]) -> float:
     except KeyError:
         raise CommandRefused(f'{spec.name}: unknown conversion index {spec.conversion} '
                              f'(known: {", ".join(str(i) for i in sorted(factors))})') from None
+
+
+# -- validation against a table entry (the CLI's restore checks a whole file first) --------
+def check_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -> Optional[str]:
+    """
+    Return why ``value`` (display units) does not fit ``spec``, or None when it fits.
+
+    Checks, in order: text against a text parameter and its length; a number against the
+    data type's range after conversion (and that it is a multiple of the conversion factor);
+    the entry's minimum and maximum; and, for an enumeration whose options are all known,
+    that the value is one of them.
+    """
+    if spec.data_type == TEXT:
+        if not isinstance(value, str):
+            return f'{spec.title} is a text parameter: {value!r} is not text'
+        if len(value) > spec.characters:
+            return f'{spec.title}: {value!r} is longer than {spec.characters} characters'
+        return None
+    try:
+        raw_number(spec, value, factors)
+    except CommandRefused as error:
+        return str(error).replace(spec.name, spec.title, 1)
+    unit = f' {spec.unit}' if spec.unit else ''
+    slack = conversion_factor(spec, factors) * 1e-6
+    if spec.minimum is not None and value < spec.minimum - slack:
+        return f'{spec.title}: {value}{unit} is below the minimum {spec.minimum:g}{unit}'
+    if spec.maximum is not None and value > spec.maximum + slack:
+        return f'{spec.title}: {value}{unit} is above the maximum {spec.maximum:g}{unit}'
+    if spec.options and not spec.options_partial and value not in spec.options:
+        known = ', '.join(f'{number} {name}' for number, name in sorted(spec.options.items()))
+        return f'{spec.title}: {value} is not an option ({_shorten(known)})'
+    return None
+
+
+def check_values(specs: Mapping[int, ParameterSpec], values: Mapping[int, Value],
+                 factors: Dict[int, float], settings_only: bool = True) -> List[str]:
+    """
+    Return one line per value of ``values`` (number -> value) that ``specs`` refuses.
+
+    A number missing from ``specs`` is refused, and with ``settings_only`` so is a parameter
+    the table marks as a readout (``setting`` False): a restore writes settings only.
+    An empty list means every value fits.
+    """
+    reasons = []
+    for number, value in values.items():
+        spec = specs.get(number)
+        if spec is None:
+            reasons.append(f'parameter {number} is not in the table')
+        elif settings_only and spec.setting is False:
+            reasons.append(f'{spec.title} is a readout, not a setting: it is not restored')
+        else:
+            reason = check_value(spec, value, factors)
+            if reason:
+                reasons.append(reason)
+    return reasons
+
+
+def settings(specs: Iterable[ParameterSpec]) -> List[ParameterSpec]:
+    """Return the entries a backup covers: those marked as settings, by number."""
+    return sorted((spec for spec in specs if spec.setting), key=lambda spec: spec.number)
+
+
+def _shorten(text: str, limit: int = 120) -> str:
+    return text if len(text) <= limit else text[:limit - 3] + '...'
