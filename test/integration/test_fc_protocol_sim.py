@@ -279,3 +279,18 @@ def test_mangle_keeps_every_kind_recognisable():
     moved = fc.decode(mangle_fc_reply('wrong_address', data, server.faults)).telegram
     assert moved.address.address == 3 and moved.pwe == 524
     assert mangle_fc_reply('no_reply', data, server.faults) is None
+
+
+def test_wire_pacing_holds_the_reply_to_the_line_time():
+    server = make_fc_protocol_server({VLT5000: 'vlt5000'}, wire_baud=9600)
+    server.open_pty()
+    server.start()
+    master = RawMaster(server.pty_path)
+    try:
+        started = time.monotonic()
+        master.reply(VLT5000, fc.read_parameter_request(520))
+        elapsed = time.monotonic() - started
+    finally:
+        master.close()
+        server.stop()
+    assert elapsed >= (16 + fc.GAP_CHARACTERS + 16) * 11 / 9600  # 39 ms at 8E1
