@@ -17,6 +17,7 @@ setup(
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5'],
+    extras_require={'recording': ['rosbags>=0.10.11', 'matplotlib>=3.6']},
     tests_require=['pytest'],  # colcon test runs pytest when this names it
     zip_safe=True,
     maintainer='drive_bridge developers',
@@ -29,6 +30,7 @@ setup(
             'drive_bridge_sim = drive_bridge.sim.cli:main',
             'drive-bridge = drive_bridge.tools.cli:main',
             'drive_bridge_plot = drive_bridge.tools.plot_recording:main',
+            'drive_bridge_record = drive_bridge.ros.record:main',
         ],
     },
 )
