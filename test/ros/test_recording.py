@@ -2,10 +2,13 @@
 Record the node's topics with drive_bridge_record, read the bag back three ways, plot it.
 
 The node runs one bus in the namespace /line1 with the devices of config/mixed_bus.yaml
-(crusher: MCD 500, feeder: FC 51) against the simulators.
+(crusher: MCD 500, feeder: FC 51) against the simulators, so the layouts in docs/ are checked
+against a bag recorded through the node.
 """
 
 from dataclasses import dataclass
+import json
+import math
 import os
 from pathlib import Path
 import select
@@ -14,6 +17,7 @@ import subprocess
 import sys
 import time
 from typing import Dict, List, Tuple
+from xml.etree import ElementTree
 
 from drive_bridge.ros.recorder import BagRecorder
 from drive_bridge.sim.devices import make_sim_server
@@ -25,6 +29,7 @@ from rosbags.interfaces import QosDurability, QosReliability
 from rosbags.rosbag2 import Reader
 import yaml
 
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 NAMESPACE = '/line1'
 DEVICES = {  # config/mixed_bus.yaml's devices, polled faster
     'crusher': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 10.0},
@@ -288,3 +293,87 @@ def test_an_existing_output_is_refused(tmp_path):
     returncode, stderr = run_recorder(['--all', '-o', str(tmp_path)])
     assert (returncode, stderr) == (2, f'drive_bridge_record: {tmp_path} exists: choose a new '
                                        'output directory\n')
+
+
+# -- the layouts in docs/ ---------------------------------------------------------------------
+def foxglove_fields(path: str) -> List[Tuple[str, str]]:
+    """Return (topic, field path) of every message path and diagnostics topic in the layout."""
+    with open(path) as stream:
+        layout = json.load(stream)
+    panels = layout['configById']
+    assert _mosaic_leaves(layout['layout']) == set(panels)
+    fields = []
+    for config in panels.values():
+        for entry in config.get('paths', []):
+            topic, _, field = entry['value'].partition('.')
+            fields.append((topic, field))
+        if 'topicToRender' in config:
+            fields.append((config['topicToRender'], ''))
+    return fields
+
+
+def _mosaic_leaves(node) -> set:
+    if isinstance(node, str):
+        return {node}
+    return _mosaic_leaves(node['first']) | _mosaic_leaves(node['second'])
+
+
+def plotjuggler_curves(path: str) -> List[str]:
+    """Return the curve names of a PlotJuggler layout (checked as PlotJuggler loads it)."""
+    root = ElementTree.parse(path).getroot()
+    assert root.tag == 'root'
+    [tabbed] = root.findall('tabbed_widget')
+    assert tabbed.get('parent') == 'main_window'
+    for splitter in root.iter('DockSplitter'):
+        children = [child for child in splitter if child.tag in ('DockSplitter', 'DockArea')]
+        assert int(splitter.get('count')) == len(children) == \
+            len(splitter.get('sizes').split(';'))
+    return [curve.get('name') for curve in root.iter('curve')]
+
+
+def _field(message, path: List[str]):
+    for name in path:
+        message = getattr(message, name)
+    return message
+
+
+def test_foxglove_layout_names_recorded_topics_and_fields(messages):
+    fields = foxglove_fields(os.path.join(ROOT, 'docs', 'foxglove_layout.json'))
+    assert {topic for topic, _ in fields} >= {f'{NAMESPACE}/feeder/speed_reference',
+                                              '/diagnostics'}
+    for topic, field in fields:
+        assert messages.get(topic, ('', []))[1], f'{topic}: not in the bag or no messages'
+        type_name, decoded = messages[topic]
+        if not field:
+            assert type_name == 'diagnostic_msgs/msg/DiagnosticArray', topic
+            continue
+        value = _field(decoded[-1], field.split('.'))
+        assert isinstance(value, (str, float, int)), f'{topic}.{field}'
+    with open(os.path.join(ROOT, 'docs', 'foxglove_layout.json')) as stream:
+        panels = json.load(stream)['configById']
+    statuses = {(status.hardware_id, status.name)
+                for array in messages['/diagnostics'][1] for status in array.status}
+    for config in panels.values():
+        if 'selectedHardwareId' in config:
+            assert (config['selectedHardwareId'], config['selectedName']) in statuses
+
+
+def test_plotjuggler_layout_names_recorded_series(messages):
+    curves = plotjuggler_curves(os.path.join(ROOT, 'docs', 'plotjuggler_layout.xml'))
+    assert len(curves) >= 12
+    for curve in curves:
+        topic = max((topic for topic in messages if curve.startswith(topic + '/')),
+                    key=len, default=None)
+        assert topic and messages[topic][1], f'{curve}: no topic of it in the bag'
+        type_name, decoded = messages[topic]
+        rest = curve[len(topic) + 1:]
+        if type_name == 'diagnostic_msgs/msg/DiagnosticArray':  # PlotJuggler's own naming
+            hardware_id, name, key = rest.split('/')
+            values = [float(status.level) if key == 'level' else
+                      float({v.key: v.value for v in status.values}[key])
+                      for array in decoded for status in array.status
+                      if (status.hardware_id, status.name) == (hardware_id, name)]
+            assert values and all(math.isfinite(value) for value in values), curve
+        else:
+            value = _field(decoded[-1], rest.split('/'))
+            assert isinstance(value, (float, int)) and not isinstance(value, bool), curve
