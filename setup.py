@@ -1,14 +1,19 @@
 """Build script of the drive_bridge ament_python package."""
 
 from glob import glob
+import os
+from xml.etree import ElementTree
 
 from setuptools import find_packages, setup
 
 PACKAGE = 'drive_bridge'
+HERE = os.path.dirname(os.path.abspath(__file__))
+# One version: package.xml's (ROS tools read it); drive_bridge.__version__ is checked against it.
+VERSION = ElementTree.parse(os.path.join(HERE, 'package.xml')).findtext('version')
 
 setup(
     name=PACKAGE,
-    version='0.3.0',
+    version=VERSION,
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
