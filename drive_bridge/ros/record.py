@@ -5,7 +5,8 @@ For machines without rosbag2 (ROS 2 from PyPI); on an apt install ``ros2 bag rec
 the same kind of bag. Name topics, or ``--all`` for every topic the ``drive_bridge`` node in
 ``--namespace`` publishes or subscribes to (``/rosout`` and ``/parameter_events`` left out;
 topics that appear later are added within a second). Relative topic names are taken in
-``--namespace``. The recording ends after ``--duration`` seconds or at Ctrl-C / SIGTERM; either
+``--namespace``. Recording starts once the subscriptions are connected to the publishers (at
+most ``--wait`` seconds), and ends after ``--duration`` seconds or at Ctrl-C / SIGTERM; either
 way the bag is closed cleanly and the exit status is 0, as with ``ros2 bag record``.
 Exit status: 0 recorded, 1 the bag could not be written, 2 bad input (one line on stderr).
 """
@@ -39,7 +40,8 @@ class BadInput(Exception):
 
 def parse_args(argv: List[str]) -> argparse.Namespace:
     """Parse and check the command line; raise BadInput with one line."""
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[1].strip())
+    parser = argparse.ArgumentParser(
+        prog=PROG, description=__doc__.split('\n\n')[1].strip().replace('``', ''))
     parser.add_argument('topics', nargs='*', help='topics to record (relative: in --namespace)')
     parser.add_argument('-a', '--all', action='store_true',
                         help='every topic of the drive_bridge node in --namespace')
@@ -90,30 +92,47 @@ def bridge_topics(node: Node, namespace: str) -> Dict[str, str]:
     return topics
 
 
-def graph_topics(node: Node, wanted: List[str]) -> Dict[str, str]:
-    """Return topic -> type of the ``wanted`` topics that the graph knows now."""
-    known = dict(node.get_topic_names_and_types())
-    return {topic: known[topic][0] for topic in wanted if known.get(topic)}
+def published_topics(node: Node, wanted: List[str]) -> Dict[str, str]:
+    """Return topic -> type of the ``wanted`` topics that have a publisher now."""
+    found = {}
+    for topic in wanted:
+        publishers = node.get_publishers_info_by_topic(topic)
+        if publishers:
+            found[topic] = publishers[0].topic_type
+    return found
 
 
 def discover(node: Node, args: argparse.Namespace) -> Dict[str, str]:
-    """Wait up to ``--wait`` for the topics; raise BadInput naming what is missing."""
+    """
+    Wait up to ``--wait`` for the topics and their publishers; raise BadInput if none.
+
+    A named topic is subscribed once its publishers are known, so that the recorder asks for
+    transient local where they offer it; one that only has subscribers when the wait ends is
+    recorded without.
+    """
     deadline = time.monotonic() + args.wait
     while True:
         found = bridge_topics(node, args.namespace) if args.all else \
-            graph_topics(node, args.topics)
+            published_topics(node, args.topics)
         if (args.all and found) or (not args.all and len(found) == len(args.topics)):
             return found
         if time.monotonic() > deadline:
             break
         rclpy.spin_once(node, timeout_sec=0.1)
+    hint = '(is the bridge running, in this ROS_DOMAIN_ID and namespace?)'
     if args.all:
         where = f'{args.namespace.rstrip("/")}/{BRIDGE_NODE}'
-        raise BadInput(f'no node {where} within {args.wait:g} s (is the bridge running, in '
-                       'this ROS_DOMAIN_ID and namespace?)')
-    missing = ', '.join(topic for topic in args.topics if topic not in found)
-    raise BadInput(f'no topic {missing} within {args.wait:g} s (is the bridge running, in '
-                   'this ROS_DOMAIN_ID and namespace?)')
+        raise BadInput(f'no node {where} within {args.wait:g} s {hint}')
+    known = dict(node.get_topic_names_and_types())
+    missing = [topic for topic in args.topics if topic not in found and not known.get(topic)]
+    if missing:
+        raise BadInput(f'no topic {", ".join(missing)} within {args.wait:g} s {hint}')
+    for topic in args.topics:
+        if topic not in found:
+            print(f'{PROG}: {topic} has no publisher yet: recording it as volatile',
+                  file=sys.stderr)
+            found[topic] = known[topic][0]
+    return found
 
 
 class _Stop:
@@ -146,6 +165,10 @@ def record(node: Node, args: argparse.Namespace, stop: _Stop) -> BagRecorder:
     try:
         for topic, type_name in sorted(topics.items()):
             recorder.add_topic(topic, type_name)
+        deadline = time.monotonic() + args.wait
+        while not recorder.matched() and time.monotonic() < deadline and not stop.requested:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        recorder.restart_clock()  # the duration counts from here
         print(f'{PROG}: recording {len(topics)} topics to {args.output}', flush=True)
         rescan = time.monotonic() + RESCAN_PERIOD_S
         while not stop.requested:

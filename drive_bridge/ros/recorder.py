@@ -87,6 +87,16 @@ class BagRecorder:
         """Return topic -> type name of every topic being recorded."""
         return dict(self._types)
 
+    def matched(self) -> bool:
+        """Return whether every subscription is connected to every publisher the graph shows."""
+        return all(subscription.get_publisher_count()
+                   >= len(self._node.get_publishers_info_by_topic(topic))
+                   for topic, subscription in self._subscriptions.items())
+
+    def restart_clock(self) -> None:
+        """Count :meth:`elapsed_s` from now (once the subscriptions are matched)."""
+        self._started_s = time.monotonic()
+
     def elapsed_s(self) -> float:
         """Return the seconds recorded so far (until :meth:`close`)."""
         return (self._stopped_s or time.monotonic()) - self._started_s

@@ -168,7 +168,7 @@ def _draw_values(axis, field: str, samples: Samples, end_s: float) -> None:
 def main(argv: Optional[List[str]] = None) -> int:
     """Plot a recording; exit 2 with one line on a bad bag or device name."""
     parser = argparse.ArgumentParser(prog='drive_bridge_plot', description=__doc__.split(
-        '\n\n')[1].split('\n')[0])
+        '\n\n')[1].split('. ')[0].replace('``', '') + '.')
     parser.add_argument('recording', help='bag directory (or a file in it)')
     parser.add_argument('output', help='PNG file to write')
     parser.add_argument('--device', action='append',

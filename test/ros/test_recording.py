@@ -11,6 +11,7 @@ import json
 import math
 import os
 from pathlib import Path
+import re
 import select
 import signal
 import subprocess
@@ -91,7 +92,7 @@ def line(tmp_path_factory):
                                           'fc': {'ramp_up_s': 1.0, 'ramp_down_s': 1.0}})
     with serving(simulator) as server, running_node(
             tmp_path_factory.mktemp('params') / 'line1.yaml',
-            {'port': server.pty_path, 'parity': 'N', 'timeout': 0.1,
+            {'port': server.pty_path, 'parity': 'N', 'timeout': 0.3,
              'diagnostics_period': 0.5}, DEVICES, drives=['feeder'],
             ready=list(DEVICES), namespace=NAMESPACE) as client:
         yield client
@@ -247,23 +248,45 @@ def test_plot_of_the_recording(recording, tmp_path):
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 10_000
 
 
-def test_duration_ends_the_recording_with_the_latched_state(line, tmp_path):
+def test_duration_ends_the_recording(line, tmp_path):
     path = str(tmp_path / 'latched')
     returncode, stderr = run_recorder(['crusher/state', '/line1/feeder/trip', '--namespace',
                                        NAMESPACE, '--duration', '1', '-o', path])
     assert returncode == 0, stderr
-    with AnyReader([Path(path)]) as reader:
-        got = {connection.topic: [reader.deserialize(raw, connection.msgtype).data
-                                  for _, _, raw in reader.messages([connection])]
-               for connection in reader.connections}
-    assert got == {'/line1/crusher/state': ['ready'], '/line1/feeder/trip': ['']}
+    summary = re.fullmatch(r'drive_bridge_record: wrote .*: \d+ messages on 2 topics in '
+                           r'([0-9.]+) s', stderr.strip().splitlines()[-1])
+    assert summary and 1.0 <= float(summary.group(1)) < 3.0, stderr
+    topics = {entry['topic_metadata']['name']: entry['topic_metadata']
+              for entry in _metadata(path)['topics_with_message_count']}
+    assert set(topics) == {'/line1/crusher/state', '/line1/feeder/trip'}
+    for topic in topics.values():
+        assert [offer['durability'] for offer in topic['offered_qos_profiles']] == \
+            ['transient_local']
+
+
+def test_a_named_topic_without_publisher_is_recorded_after_the_wait(line, tmp_path):
+    from std_msgs.msg import Float32
+    subscription = line.node.create_subscription(Float32, '/line1/only_listened', print, 10)
+    try:
+        path = str(tmp_path / 'unpublished')
+        returncode, stderr = run_recorder(['/line1/only_listened', '--wait', '1',
+                                           '--duration', '0.5', '-o', path])
+    finally:
+        line.node.destroy_subscription(subscription)
+    assert returncode == 0, stderr
+    assert stderr.startswith('drive_bridge_record: /line1/only_listened has no publisher yet: '
+                             'recording it as volatile\n')
+    [entry] = _metadata(path)['topics_with_message_count']
+    assert entry['message_count'] == 0
+    assert entry['topic_metadata']['offered_qos_profiles'] == []
 
 
 def test_recorder_class_in_process(line, tmp_path):
     recorder = BagRecorder(line.node, str(tmp_path / 'in_process'))
     recorder.add_topic('/line1/crusher/state', 'std_msgs/msg/String')
     recorder.add_topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')
-    assert line.spin_until(lambda: recorder.counts['/diagnostics'] >= 2)
+    assert line.spin_until(lambda: recorder.counts['/diagnostics'] >= 2
+                           and recorder.counts['/line1/crusher/state'] >= 1)  # latched
     recorder.close()
     metadata = _metadata(str(tmp_path / 'in_process'))
     counts = {entry['topic_metadata']['name']: entry['message_count']
