@@ -1,14 +1,19 @@
 """Build script of the drive_bridge ament_python package."""
 
 from glob import glob
+import os
+from xml.etree import ElementTree
 
 from setuptools import find_packages, setup
 
 PACKAGE = 'drive_bridge'
+HERE = os.path.dirname(os.path.abspath(__file__))
+# One version: package.xml's (ROS tools read it); drive_bridge.__version__ is checked against it.
+VERSION = ElementTree.parse(os.path.join(HERE, 'package.xml')).findtext('version')
 
 setup(
     name=PACKAGE,
-    version='0.3.0',
+    version=VERSION,
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
@@ -17,6 +22,7 @@ setup(
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5'],
+    extras_require={'recording': ['rosbags>=0.10.11', 'matplotlib>=3.6']},
     tests_require=['pytest'],  # colcon test runs pytest when this names it
     zip_safe=True,
     maintainer='drive_bridge developers',
@@ -29,6 +35,7 @@ setup(
             'drive_bridge_sim = drive_bridge.sim.cli:main',
             'drive-bridge = drive_bridge.tools.cli:main',
             'drive_bridge_plot = drive_bridge.tools.plot_recording:main',
+            'drive_bridge_record = drive_bridge.ros.record:main',
         ],
     },
 )

@@ -91,3 +91,7 @@ class CommandExpired(CommandRefused):
 
 class ModelMismatch(DriveBridgeError):
     """The device reports another model than the configuration names."""
+
+
+class RecordingError(DriveBridgeError):
+    """A bag cannot be recorded or read: unknown topic or type, output exists, not a bag."""

@@ -9,7 +9,8 @@ if ! "$python" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null
   echo "drive_bridge needs Python 3.11 or newer as '$python' (set PYTHON=...)" >&2; exit 1
 fi
 stamp="$venv/.drive_bridge_stamp"
-want=$(cat "$root/$requirements" "$root/requirements.txt" "$root/setup.py" | sha256sum | cut -c1-16)
+want=$(cat "$root/$requirements" "$root/requirements.txt" "$root/setup.py" "$root/package.xml" \
+  | sha256sum | cut -c1-16)
 want="$want $* $("$python" --version 2>&1)"
 if [ -x "$venv/bin/python" ] && [ "$(cat "$stamp" 2>/dev/null)" = "$want" ]; then
   exit 0

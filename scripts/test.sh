@@ -11,16 +11,16 @@ export FASTRTPS_DEFAULT_PROFILES_FILE="$root/test/fastdds_test_profile.xml"
 echo "== pymodbus $("$VENV/bin/python" -c 'import pymodbus; print(pymodbus.__version__)'): all tiers"
 "$VENV/bin/python" -m pytest -q -p no:cacheprovider test "$@"
 
-echo "== colcon build and colcon test --return-code-on-test-failure (the ROS package path)"
+echo "== colcon build, the installed commands, colcon test --return-code-on-test-failure"
 workspace=$(mktemp -d)
 trap 'rm -rf "$workspace"' EXIT
 mkdir -p "$workspace/src/drive_bridge"
 git -C "$root" ls-files -z --cached --others --exclude-standard \
   | (cd "$root" && xargs -0 cp --parents -t "$workspace/src/drive_bridge")
 (cd "$workspace" && "$VENV/bin/colcon" --log-base log build --event-handlers console_direct- \
+  && "$root/scripts/check_install.sh" "$workspace/install" \
   && "$VENV/bin/colcon" --log-base log test --return-code-on-test-failure \
-       --event-handlers console_direct- \
-       --pytest-args test/unit test/test_flake8.py test/test_pep257.py \
+       --event-handlers console_direct- --pytest-args -m "unit or linter" \
   && "$VENV/bin/colcon" --log-base log test-result --all)
 
 VENV369="$root/.venv-pymodbus369"

@@ -71,10 +71,10 @@ def serving(server) -> Iterator[object]:
 
 @contextmanager
 def running_node(params_path, bus: Dict, devices: Dict[str, Dict], drives: Sequence[str] = (),
-                 ready: Sequence[str] = ()) -> Iterator['RosClient']:
+                 ready: Sequence[str] = (), namespace: str = '') -> Iterator['RosClient']:
     """Run the node on ``bus`` with ``devices``; yield a client once ``ready`` are ready."""
-    process = start_node(write_params(params_path, bus, devices))
-    client = RosClient(list(devices), drives=list(drives))
+    process = start_node(write_params(params_path, bus, devices), namespace)
+    client = RosClient(list(devices), namespace=namespace, drives=list(drives))
     try:
         for name in ready:
             assert client.wait_state(name, 'ready', 15.0), stop_node(process)

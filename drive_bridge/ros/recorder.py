@@ -1,113 +1,159 @@
 """
-Record topics into an MCAP file laid out as Jazzy's ``ros2 bag record`` writes it.
+Record topics into a rosbag2 bag with MCAP storage, written by the ``rosbags`` library.
 
-Profile ``ros2``, schema encoding ``ros2msg`` (the ``.msg`` text with the dependent types
-appended after ``====`` separator lines, as rosbag2 does), message encoding ``cdr`` (the
-serialized bytes exactly as received, subscribed with ``raw=True``), one channel per topic.
-For machines without rosbag2 (ROS from PyPI); ``ros2 bag record`` writes the same layout.
+The bag is what ``ros2 bag record`` (Jazzy) writes, as far as rosbags writes it: a directory
+with ``metadata.yaml`` (version 9) and one ``.mcap`` file (profile ``ros2``, ``ros2msg``
+schemas, CDR messages kept as received through ``raw=True`` subscriptions). Each topic
+carries the QoS profiles its publishers offer, taken from the ROS graph as rosbag2 takes
+them, so ``ros2 bag play`` replays the latched ``<device>/state`` and ``<device>/trip``
+(transient local, depth 1) as latched, and its RIHS01 type hash. Like rosbag2, the recorder
+asks for transient local only when every publisher of a topic offers it, and for reliable
+only when every publisher is reliable.
 """
 
-import os
-import re
+import functools
+import importlib
 import time
-from typing import Dict, List, Optional, Set
+from typing import Dict, List, Optional
 
-from ament_index_python.packages import get_package_share_directory
-from mcap.writer import Writer
+from drive_bridge.errors import RecordingError
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.interfaces import (
+    Connection, Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime)
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.typesys import get_typestore, Stores
 
-SEPARATOR = '=' * 80
-PRIMITIVES = {'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
-              'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'}
-
-
-def type_name(message_type) -> str:
-    """Return ``pkg/msg/Name`` of a message class."""
-    package = message_type.__module__.split('.')[0]
-    return f'{package}/msg/{message_type.__name__}'
+SUBSCRIPTION_DEPTH = 100  # rosbag2 asks for 10; a busy machine can run behind a 10 Hz poll
+NANOSECONDS_PER_SECOND = 1_000_000_000
+BAG_VERSION = 9  # what Jazzy's rosbag2 writes
 
 
-def _msg_text(package: str, name: str) -> str:
-    path = os.path.join(get_package_share_directory(package), 'msg', f'{name}.msg')
-    with open(path) as stream:
-        return stream.read()
+def rosbags_qos(profile: QoSProfile) -> Qos:
+    """Return an rclpy QoS profile (as the graph reports an offer) as rosbags' ``Qos``."""
+    def duration(value) -> QosTime:
+        seconds, nanoseconds = divmod(value.nanoseconds, NANOSECONDS_PER_SECOND)
+        return QosTime(seconds, nanoseconds)
+    return Qos(QosHistory(int(profile.history)), int(profile.depth),
+               QosReliability(int(profile.reliability)), QosDurability(int(profile.durability)),
+               duration(profile.deadline), duration(profile.lifespan),
+               QosLiveliness(int(profile.liveliness)),
+               duration(profile.liveliness_lease_duration),
+               bool(profile.avoid_ros_namespace_conventions))
 
 
-def _field_types(text: str, package: str) -> List[str]:
-    """Return the non-primitive field types of a .msg text as ``pkg/Name``."""
-    types = []
-    for line in text.splitlines():
-        tokens = line.split('#', 1)[0].split()
-        if len(tokens) < 2:
-            continue
-        base = re.sub(r'\[[^\]]*\]$', '', tokens[0])  # arrays: T[], T[3], T[<=3]
-        base = re.sub(r'<=\d+$', '', base)  # bounded strings
-        if base in PRIMITIVES:  # constants are always primitive
-            continue
-        if '/' not in base:
-            base = 'std_msgs/Header' if base == 'Header' else f'{package}/{base}'
-        types.append(base)
-    return types
+def request_qos(offers: List[QoSProfile]) -> QoSProfile:
+    """Return the subscription QoS that receives from every offer (rosbag2's rule)."""
+    profile = QoSProfile(depth=SUBSCRIPTION_DEPTH)
+    if offers and not all(offer.reliability == ReliabilityPolicy.RELIABLE for offer in offers):
+        profile.reliability = ReliabilityPolicy.BEST_EFFORT
+    if offers and all(offer.durability == DurabilityPolicy.TRANSIENT_LOCAL for offer in offers):
+        profile.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    return profile
 
 
-def message_definition(message_type) -> str:
-    """Return the ros2msg schema text of a message class, dependencies appended."""
-    package, _, name = type_name(message_type).split('/')
-    text = _msg_text(package, name)
-    seen: Set[str] = set()
-    parts = [text.rstrip('\n')]
-    pending = _field_types(text, package)
-    while pending:
-        dependency = pending.pop(0)
-        if dependency in seen:
-            continue
-        seen.add(dependency)
-        dep_package, dep_name = dependency.split('/')
-        dep_text = _msg_text(dep_package, dep_name)
-        parts.append(f'{SEPARATOR}\nMSG: {dependency}\n{dep_text.rstrip()}')
-        pending += _field_types(dep_text, dep_package)
-    return '\n'.join(parts) + '\n'
+@functools.lru_cache(maxsize=1)
+def jazzy_typestore():
+    """Return rosbags' store of the ROS 2 Jazzy message types (definitions and hashes)."""
+    return get_typestore(Stores.ROS2_JAZZY)
 
 
-class McapRecorder:
-    """Subscribe to topics and write every message to an MCAP file until :meth:`close`."""
+def is_recordable(type_name: str) -> bool:
+    """Return whether rosbags knows ``type_name`` (``pkg/msg/Name``) as a Jazzy type."""
+    return type_name in jazzy_typestore().fielddefs
 
-    def __init__(self, node: Node, path: str, topics: Dict[str, type],
-                 qos: Optional[Dict[str, QoSProfile]] = None):
-        self._stream = open(path, 'wb')
-        self._writer = Writer(self._stream)
-        self._writer.start(profile='ros2', library='drive_bridge recorder')
-        self._sequence = 0
-        self.counts: Dict[str, int] = {}
-        self._subscriptions = []
-        schemas: Dict[str, int] = {}
-        for topic, message_type in topics.items():
-            name = type_name(message_type)
-            if name not in schemas:
-                schemas[name] = self._writer.register_schema(
-                    name=name, encoding='ros2msg',
-                    data=message_definition(message_type).encode())
-            channel = self._writer.register_channel(
-                topic=topic, message_encoding='cdr', schema_id=schemas[name])
-            self.counts[topic] = 0
-            profile = (qos or {}).get(topic, QoSProfile(depth=100))
-            self._subscriptions.append(node.create_subscription(
-                message_type, topic,
-                lambda data, c=channel, t=topic: self._write(c, t, data), profile, raw=True))
+
+class BagRecorder:
+    """Write every message of the added topics into a new bag until :meth:`close`."""
+
+    def __init__(self, node: Node, output: str):
         self._node = node
+        self._typestore = jazzy_typestore()
+        self._writer = Writer(output, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+        try:
+            self._writer.open()
+        except (WriterError, OSError) as error:
+            raise RecordingError(f'cannot create the bag: {error}') from None
+        self.path = output
+        self._started_s = time.monotonic()
+        self._stopped_s: Optional[float] = None
+        self.counts: Dict[str, int] = {}
+        self._types: Dict[str, str] = {}
+        self._connections: Dict[str, Connection] = {}
+        self._subscriptions = {}
 
-    def _write(self, channel: int, topic: str, data: bytes) -> None:
-        now_ns = time.time_ns()
-        self._sequence += 1
+    @property
+    def topics(self) -> Dict[str, str]:
+        """Return topic -> type name of every topic being recorded."""
+        return dict(self._types)
+
+    def matched(self) -> bool:
+        """Return whether every subscription is connected to every publisher the graph shows."""
+        return all(subscription.get_publisher_count()
+                   >= len(self._node.get_publishers_info_by_topic(topic))
+                   for topic, subscription in self._subscriptions.items())
+
+    def restart_clock(self) -> None:
+        """Count :meth:`elapsed_s` from now (once the subscriptions are matched)."""
+        self._started_s = time.monotonic()
+
+    def elapsed_s(self) -> float:
+        """Return the seconds recorded so far (until :meth:`close`)."""
+        return (self._stopped_s or time.monotonic()) - self._started_s
+
+    def add_topic(self, topic: str, type_name: str) -> None:
+        """Subscribe to ``topic`` (a full name) of ``type_name`` (``pkg/msg/Name``)."""
+        if topic in self._types:
+            return
+        if not is_recordable(type_name):
+            raise RecordingError(f'{topic}: type {type_name} is not a ROS 2 Jazzy type that '
+                                 'rosbags knows')
+        message_type = _message_class(type_name)
+        offers = [info.qos_profile for info in self._node.get_publishers_info_by_topic(topic)]
+        self._types[topic] = type_name
+        self.counts[topic] = 0
+        self._subscriptions[topic] = self._node.create_subscription(
+            message_type, topic, lambda data, t=topic: self._write(t, data),
+            request_qos(offers), raw=True)
+
+    def _connection(self, topic: str) -> Connection:
+        """Return the bag connection of ``topic``, made with the offers the graph shows now."""
+        connection = self._connections.get(topic)
+        if connection is None:
+            offers = [rosbags_qos(info.qos_profile)
+                      for info in self._node.get_publishers_info_by_topic(topic)]
+            connection = self._writer.add_connection(
+                topic, self._types[topic], typestore=self._typestore,
+                offered_qos_profiles=offers)
+            self._connections[topic] = connection
+        return connection
+
+    def _write(self, topic: str, data: bytes) -> None:
+        connection = self._connection(topic)  # at the first message: its publisher is known
+        self._writer.write(connection, self._node.get_clock().now().nanoseconds, data)
         self.counts[topic] += 1
-        self._writer.add_message(channel_id=channel, log_time=now_ns, data=data,
-                                 publish_time=now_ns, sequence=self._sequence)
 
     def close(self) -> None:
-        """Stop recording and finish the file."""
-        for subscription in self._subscriptions:
+        """Stop recording, list the topics without messages too, write metadata.yaml."""
+        self._stopped_s = time.monotonic()
+        for subscription in self._subscriptions.values():
             self._node.destroy_subscription(subscription)
         self._subscriptions.clear()
-        self._writer.finish()
-        self._stream.close()
+        for topic in self._types:
+            self._connection(topic)
+        self._writer.close()
+
+
+def _message_class(type_name: str) -> type:
+    """Import the Python class of ``pkg/msg/Name`` (rosidl_runtime_py is not on PyPI)."""
+    package, _, name = type_name.split('/')
+    try:
+        return getattr(importlib.import_module(f'{package}.msg'), name)
+    except (ImportError, AttributeError):
+        raise RecordingError(f'type {type_name} is not installed here') from None
+
+
+def count_summary(counts: Dict[str, int], duration_s: Optional[float] = None) -> str:
+    """Return 'N messages on M topics' (and the duration) for a one-line report."""
+    text = f'{sum(counts.values())} messages on {len(counts)} topics'
+    return f'{text} in {duration_s:.1f} s' if duration_s is not None else text

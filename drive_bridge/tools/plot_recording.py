@@ -1,108 +1,183 @@
 """
-Plot a recording (MCAP from ``ros2 bag record`` or the bridge's recorder) as a PNG.
+Plot a recording (a rosbag2 bag from ``ros2 bag record`` or ``drive_bridge_record``) as a PNG.
 
-One column per device found in the file (a ``<device>/state`` topic), three panels each:
-state over time, motor current in amperes, speed feedback in percent (drives only). Needs
-``mcap``, ``mcap-ros2-support`` and ``matplotlib``; no ROS installation.
-Run: ``drive_bridge_plot recording.mcap plot.png [--device NAME] [--title TEXT]``
+One column per device (a ``<device>/state`` topic) and one panel per quantity the bag has
+for it: the state (each of the contract's twelve states on its own row), motor current [A],
+motor temperature [% of thermal capacity], and speed reference against speed feedback [%].
+A starter has no speed topics, so its panels share the whole column. Reads the bag with
+``rosbags`` and draws with ``matplotlib``; no ROS installation needed.
+Run: ``drive_bridge_plot BAG plot.png [--device NAME] [--title TEXT]`` (BAG: the bag
+directory, or a file in it). Exit status: 0 written, 2 bad input (one line on stderr).
 """
 
 import argparse
 from collections import defaultdict
+import os
 import sys
 from typing import Dict, List, Optional, Tuple
 
-STATES = ('offline', 'unknown', 'not_ready', 'tripped', 'ready', 'stopping', 'starting',
-          'running')
-Series = Dict[str, Dict[str, List[Tuple[float, object]]]]  # device -> field -> samples
+# The contract's states, bottom row to top row: not running, standing by, moving.
+STATES = ('offline', 'unknown', 'not_ready', 'tripped', 'program_mode', 'restart_delay',
+          'ready', 'jog_reverse', 'jog_forward', 'stopping', 'starting', 'running')
+FIELDS = ('state', 'motor_current', 'motor_temperature', 'speed_reference', 'speed_feedback')
+# panel -> (fields drawn in it, y label); the state panel comes first in every column.
+PANELS = (('motor_current', ('motor_current',), 'motor current [A]'),
+          ('motor_temperature', ('motor_temperature',), 'motor temperature [%]'),
+          ('speed', ('speed_reference', 'speed_feedback'), 'speed [%]'))
+STYLE = {'motor_current': ('tab:red', 'current'),
+         'motor_temperature': ('tab:orange', 'temperature'),
+         'speed_reference': ('tab:gray', 'reference'),
+         'speed_feedback': ('tab:green', 'feedback')}
+Samples = List[Tuple[float, object]]
+Series = Dict[str, Dict[str, Samples]]  # device -> field -> (seconds from the start, value)
+
+
+class NotARecording(Exception):
+    """The file is not a bag, or it lacks what was asked for."""
+
+
+def bag_directory(path: str) -> str:
+    """Return the bag directory of ``path`` (the directory itself or a file inside it)."""
+    if not os.path.exists(path):
+        raise NotARecording('no such file or directory')
+    directory = (os.path.dirname(path) or '.') if os.path.isfile(path) else path
+    if not os.path.isfile(os.path.join(directory, 'metadata.yaml')):
+        raise NotARecording(f'not a rosbag2 bag: no metadata.yaml in {directory}')
+    return directory
 
 
 def read_recording(path: str) -> Series:
-    """Return device -> topic field (state, motor_current, speed_feedback) -> samples."""
+    """Return device -> field -> samples of every ``<device>/<field>`` topic in the bag."""
+    from pathlib import Path
+
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.rosbag2 import ReaderError
     series: Series = defaultdict(lambda: defaultdict(list))
-    start_ns: Optional[int] = None
-    for _, channel, message, decoded in decoded_messages(path):
-        device, _, field = channel.topic.strip('/').rpartition('/')
-        if field not in ('state', 'motor_current', 'speed_feedback') or not device:
-            continue
-        start_ns = message.log_time if start_ns is None else start_ns
-        series[device][field].append(((message.log_time - start_ns) / 1e9, decoded.data))
+    try:
+        with AnyReader([Path(bag_directory(path))]) as reader:
+            wanted = [connection for connection in reader.connections
+                      if _device_field(connection.topic)[1] in FIELDS]
+            for connection, time_ns, raw in reader.messages(connections=wanted):
+                device, field = _device_field(connection.topic)
+                value = reader.deserialize(raw, connection.msgtype).data
+                series[device][field].append(((time_ns - reader.start_time) / 1e9, value))
+    except (AnyReaderError, ReaderError) as error:
+        raise NotARecording(f'not a rosbag2 bag: {error}') from None
     return series
 
 
-def decoded_messages(path: str):
-    """Yield (schema, channel, message, decoded message) of an MCAP file with ROS 2 CDR."""
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
-    with open(path, 'rb') as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        yield from reader.iter_decoded_messages()
+def _device_field(topic: str) -> Tuple[str, str]:
+    device, _, field = topic.strip('/').rpartition('/')
+    return (device, field) if device else ('', '')
+
+
+def devices_of(series: Series) -> List[str]:
+    """Return the devices (a ``<device>/state`` topic with messages) in name order."""
+    return sorted(name for name, fields in series.items() if fields.get('state'))
+
+
+def select_devices(series: Series, wanted: Optional[List[str]]) -> List[str]:
+    """Return the devices to draw: all, or ``wanted`` (full name or last part, unambiguous)."""
+    names = devices_of(series)
+    if not names:
+        raise NotARecording('the bag has no <device>/state topic with messages')
+    if not wanted:
+        return names
+    chosen = []
+    for request in wanted:
+        matches = [name for name in names
+                   if name == request.strip('/') or name.rpartition('/')[2] == request]
+        if len(matches) != 1:
+            reason = 'no device' if not matches else 'more than one device named'
+            raise NotARecording(f'{reason} {request!r}: devices are {", ".join(names)}')
+        chosen.append(matches[0])
+    return chosen
+
+
+def panels_of(fields: Dict[str, Samples]) -> List[str]:
+    """Return the panels of one device: state, then each quantity the bag has samples of."""
+    return ['state'] + [panel for panel, panel_fields, _ in PANELS
+                        if any(fields.get(field) for field in panel_fields)]
+
+
+def state_level(state: object) -> int:
+    """Return the row of a state; a text outside the contract is drawn as ``unknown``."""
+    return STATES.index(state) if state in STATES else STATES.index('unknown')
 
 
 def plot(series: Series, output: str, devices: Optional[List[str]] = None,
-         title: str = '') -> None:
-    """Draw the panels of ``devices`` (all with a state topic by default) into ``output``."""
+         title: str = ''):
+    """Draw ``devices`` (default: all) into the PNG ``output``; return the matplotlib figure."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    names = devices or sorted(name for name in series if series[name].get('state'))
-    if not names:
-        raise ValueError('the recording has no <device>/state topic')
-    figure, axes = plt.subplots(3, len(names), sharex='col', squeeze=False,
-                                figsize=(6.5 * len(names), 6.5))
-    for column, name in enumerate(names):
-        _draw_device(axes[:, column], name, series[name])
+    names = select_devices(series, devices)
+    figure = plt.figure(figsize=(6.5 * len(names), 7.5), layout='constrained')
+    columns = figure.subfigures(1, len(names), squeeze=False)[0]
+    end_s = max(samples[-1][0] for fields in series.values()
+                for samples in fields.values() if samples)
+    for column, name in zip(columns, names):
+        _draw_device(column, name, series[name], end_s)
     if title:
         figure.suptitle(title)
-    figure.tight_layout()
     figure.savefig(output, dpi=90)
     plt.close(figure)
+    return figure
 
 
-def _draw_device(axes, name: str, fields) -> None:
-    state_axis, current_axis, speed_axis = axes
-    states = fields.get('state', [])
-    if states:
-        times = [time for time, _ in states] + [_last_time(fields)]
-        levels = [STATES.index(value) if value in STATES else 0 for _, value in states]
-        state_axis.step(times, levels + levels[-1:], where='post', color='tab:blue')
-    state_axis.set_yticks(range(len(STATES)), STATES)
-    state_axis.set_title(f'{name}')
-    state_axis.set_ylabel('state')
-    for axis, field, label, colour in ((current_axis, 'motor_current', 'motor current [A]',
-                                        'tab:red'),
-                                       (speed_axis, 'speed_feedback', 'speed feedback [%]',
-                                        'tab:green')):
-        samples = fields.get(field, [])
-        if samples:
-            axis.plot([time for time, _ in samples], [value for _, value in samples],
-                      color=colour)
-        else:
-            axis.text(0.5, 0.5, f'no {field} topic', ha='center', va='center',
-                      transform=axis.transAxes)
+def _draw_device(subfigure, name: str, fields: Dict[str, Samples], end_s: float) -> None:
+    panels = panels_of(fields)
+    axes = subfigure.subplots(len(panels), 1, sharex=True, squeeze=False,
+                              height_ratios=[2.2] + [1.0] * (len(panels) - 1))[:, 0]
+    subfigure.suptitle(name)
+    _draw_states(axes[0], fields['state'], end_s)
+    for axis, panel in zip(axes[1:], panels[1:]):
+        _, panel_fields, label = next(entry for entry in PANELS if entry[0] == panel)
+        for field in panel_fields:
+            _draw_values(axis, field, fields.get(field, []), end_s)
         axis.set_ylabel(label)
         axis.grid(True, alpha=0.3)
-    speed_axis.set_xlabel('time [s]')
+        if len(panel_fields) > 1:
+            axis.legend(loc='best', fontsize='small')
+    axes[-1].set_xlabel('time [s]')
 
 
-def _last_time(fields) -> float:
-    return max((samples[-1][0] for samples in fields.values() if samples), default=0.0)
+def _draw_states(axis, states: Samples, end_s: float) -> None:
+    times = [time for time, _ in states] + [max(end_s, states[-1][0])]
+    levels = [state_level(state) for _, state in states]
+    axis.step(times, levels + levels[-1:], where='post', color='tab:blue')
+    axis.set_yticks(range(len(STATES)), STATES)
+    axis.set_ylim(-0.5, len(STATES) - 0.5)
+    axis.set_ylabel('state')
+    axis.grid(True, axis='y', alpha=0.3)
+
+
+def _draw_values(axis, field: str, samples: Samples, end_s: float) -> None:
+    if not samples:
+        return
+    colour, label = STYLE[field]
+    times = [time for time, _ in samples]
+    values = [value for _, value in samples]
+    if field == 'speed_reference':  # a set point holds until the next one
+        axis.step(times + [end_s], values + values[-1:], where='post', color=colour,
+                  linestyle='--', label=label)
+    else:
+        axis.plot(times, values, color=colour, label=label)
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    """Plot a recording; exit 2 with one line on a bad file."""
+    """Plot a recording; exit 2 with one line on a bad bag or device name."""
     parser = argparse.ArgumentParser(prog='drive_bridge_plot', description=__doc__.split(
-        '\n\n')[0].strip())
-    parser.add_argument('recording', help='MCAP file')
+        '\n\n')[1].split('. ')[0].replace('``', '') + '.')
+    parser.add_argument('recording', help='bag directory (or a file in it)')
     parser.add_argument('output', help='PNG file to write')
-    parser.add_argument('--device', action='append', help='only this device (repeatable)')
+    parser.add_argument('--device', action='append',
+                        help='only this device (repeatable; e.g. crusher or line1/crusher)')
     parser.add_argument('--title', default='')
     args = parser.parse_args(argv)
-    from mcap.exceptions import McapError
     try:
-        series = read_recording(args.recording)
-        plot(series, args.output, args.device, args.title)
-    except (OSError, ValueError, KeyError, McapError) as error:
+        plot(read_recording(args.recording), args.output, args.device, args.title)
+    except (NotARecording, OSError, ValueError) as error:
         print(f'drive_bridge_plot: {args.recording}: {error}', file=sys.stderr)
         return 2
     return 0
