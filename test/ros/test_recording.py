@@ -209,7 +209,7 @@ def test_rosbags_reads_types_qos_and_counts(recording, messages):
     assert data('feeder/speed_reference') == [REFERENCE_PCT]
     assert max(data('feeder/speed_feedback')) == pytest.approx(REFERENCE_PCT, abs=0.01)
     statuses = {status.name for array in messages['/diagnostics'][1] for status in array.status}
-    assert {'drive_bridge: crusher', 'drive_bridge: feeder'} <= statuses
+    assert {'/line1/drive_bridge: crusher', '/line1/drive_bridge: feeder'} <= statuses
 
 
 def _in_order(values, wanted) -> bool:
@@ -391,7 +391,8 @@ def test_plotjuggler_layout_names_recorded_series(messages):
         type_name, decoded = messages[topic]
         rest = curve[len(topic) + 1:]
         if type_name == 'diagnostic_msgs/msg/DiagnosticArray':  # PlotJuggler's own naming
-            hardware_id, name, key = rest.split('/')
+            hardware_id, _, status_and_key = rest.partition('/')  # names may hold slashes
+            name, _, key = status_and_key.rpartition('/')
             values = [float(status.level) if key == 'level' else
                       float({v.key: v.value for v in status.values}[key])
                       for array in decoded for status in array.status
