@@ -250,6 +250,10 @@ class ParameterAccess(ABC):
         """Return the numbers of the settings a backup saves, in order."""
         return ()
 
+    def parameter_table(self) -> Mapping[int, Any]:
+        """Return what is known of each parameter (ParameterSpec by number; may be empty)."""
+        return {}
+
 
 class SetupWrites(ABC):
     """Capability: settings written each time the device comes online (not monitor-only)."""

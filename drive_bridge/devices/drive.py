@@ -12,7 +12,7 @@ every poll, so the drive's own control word timeout stops it when the bridge is 
 nothing while the view has no command in force.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
 from drive_bridge.devices.contracts import (
@@ -44,7 +44,7 @@ class DriveFamilyData:
 
     name: str
     models: Tuple[str, ...]
-    parameters: Dict[int, ParameterSpec]
+    parameters: Dict[int, ParameterSpec]  # every model's parameters together
     readouts: Dict[str, Dict[str, int]]  # model -> readout name -> parameter number
     conversion_factors: Dict[int, float]
     alarm_bits: Dict[int, Tuple[int, str]]  # alarm word bit -> (trip code, name)
@@ -64,16 +64,25 @@ class DriveFamilyData:
     text_read_index: Optional[int] = None  # VLT: IND = 0x0400 before a text read
     text_write_index: Optional[int] = None  # VLT: IND = 0x0500 before a text write
     parameter_label: Callable[[int], str] = str  # how the manual writes a number (16-14)
-    is_setting: Callable[[int], bool] = lambda number: True  # not a readout: backed up
+    model_parameters: Dict[str, Dict[int, ParameterSpec]] = field(default_factory=dict)
+    # Registers that carry process data or control (never a parameter write; FC: 50000 CTW).
+    process_registers: Tuple[int, ...] = ()
+
+    def table(self, model: Optional[str] = None) -> Dict[int, ParameterSpec]:
+        """Return the parameter table of ``model`` (the family's when it has one table)."""
+        return self.model_parameters.get(model, self.parameters) if model else self.parameters
 
     def spec(self, number: int, data_type: Optional[str] = None,
-             conversion: Optional[int] = None) -> ParameterSpec:
+             conversion: Optional[int] = None, model: Optional[str] = None) -> ParameterSpec:
         """Return the spec of parameter ``number``, known or as the caller describes it."""
-        known = self.parameters.get(number)
+        known = self.table(model).get(number) or self.parameters.get(number)
         if known is None and data_type is None:
             raise CommandRefused(
-                f'parameter {number} is not in the {self.name} table: give its data type '
-                '(int16, uint16, int32, uint32, int8, uint8, text) and conversion index')
+                f'parameter {number} is not in the {model or self.name} table: give its data '
+                'type (int16, uint16, int32, uint32, int8, uint8, text) and conversion index')
+        if known is not None and data_type in (None, known.data_type) and \
+                conversion in (None, known.conversion):
+            return replace(known, name=f'{known.name} (par. {self.parameter_label(number)})')
         name = known.name if known else 'parameter'
         return ParameterSpec(
             number, f'{name} (par. {self.parameter_label(number)})',
@@ -81,6 +90,10 @@ class DriveFamilyData:
             known.conversion if conversion is None and known else (conversion or 0),
             known.source if known else 'given by the caller',
             known.characters if known else 20)
+
+    def settings(self, model: Optional[str] = None) -> List[int]:
+        """Return the numbers of the settings a backup saves (readouts excluded)."""
+        return sorted(number for number, spec in self.table(model).items() if spec.setting)
 
 
 def control_word_for(steady: Optional[Command]) -> Optional[int]:
@@ -136,7 +149,8 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
     def readouts(self) -> Dict[str, ParameterSpec]:
         """Return readout name -> parameter spec for the resolved model."""
         numbers = dict(self.data.readouts[self.default_model], **self.readout_overrides)
-        return {name: self.data.spec(number) for name, number in numbers.items()}
+        return {name: self.data.spec(number, model=self.default_model)
+                for name, number in numbers.items()}
 
     @property
     def reading_fields(self) -> FrozenSet[str]:
@@ -416,8 +430,11 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
     def parameter_plan(self, number: int, value: Any = None,
                        options: ParameterOptions = ParameterOptions()) -> ParameterPlan:
         """Return the transactions reading (value None) or writing parameter ``number``."""
-        spec = self.data.spec(number, options.data_type, options.conversion)
-        parameter_address(number)
+        spec = self.data.spec(number, options.data_type, options.conversion, self.default_model)
+        if parameter_address(number) in self.data.process_registers:
+            raise CommandRefused(f'parameter {number}: its register carries process data or '
+                                 'control (control word, reference, status): not a parameter; '
+                                 'use the commands and the speed reference')
         before: List[Request] = []
         after: List[Request] = []
         index_word = self._index_word(spec, options.index, value is not None)
@@ -441,8 +458,12 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
                              lambda results: f'{spec.name} = {value!r} acknowledged')
 
     def parameter_numbers(self) -> Sequence[int]:
-        """Return the settings of the family's table (readouts excluded)."""
-        return [number for number in self.data.parameters if self.data.is_setting(number)]
+        """Return the settings of the model's table (readouts excluded)."""
+        return self.data.settings(self.default_model)
+
+    def parameter_table(self) -> Mapping[int, ParameterSpec]:
+        """Return the model's parameter table."""
+        return self.data.table(self.default_model)
 
     def _index_word(self, spec: ParameterSpec, index: Optional[int],
                     write: bool) -> Optional[int]:

@@ -11,7 +11,8 @@ from typing import Dict, Optional, Tuple
 from drive_bridge.devices.contracts import Family
 from drive_bridge.devices.drive import (
     COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile, make_drive_simulator)
-from drive_bridge.devices.parameters import FC_CONVERSION_FACTORS, ParameterSpec, TEXT
+from drive_bridge.devices.fc51_parameters import FC51_PARAMETERS
+from drive_bridge.devices.parameters import FC_CONVERSION_FACTORS, ParameterSpec
 from drive_bridge.settings import Setting
 
 FAMILY = 'fc'
@@ -27,40 +28,11 @@ REGISTER_LAST_ERROR = 6  # register 7: detail of the last exception 04
 REGISTER_INDEX = 8  # register 9: array index of indexed parameters
 
 
-def _p(number: int, name: str, data_type: str, conversion: int, status: str) -> ParameterSpec:
-    return ParameterSpec(number, name, data_type, conversion,
-                         source=f'protocols.md "FC-series parameters" ({status})')
-
-
-# Parameters the bridge reads or writes (PNU without the dash: 16-14 -> 1614).
-PARAMETERS: Dict[int, ParameterSpec] = {spec.number: spec for spec in (
-    _p(803, 'control word timeout time [s]', 'uint32', -1, 'inferred from FC 102/300'),
-    _p(804, 'control word timeout function', 'uint8', 0, 'inferred from FC 102/300'),
-    _p(1500, 'operating hours [h]', 'uint32', 74, 'confirmed'),
-    _p(1501, 'running hours [h]', 'uint32', 74, 'confirmed'),
-    ParameterSpec(1540, 'FC type', TEXT, 0, 'protocols.md (confirmed)', characters=20),
-    ParameterSpec(1543, 'software version', TEXT, 0, 'protocols.md (confirmed)',
-                  characters=20),
-    _p(1600, 'control word', 'uint16', 0, 'confirmed'),
-    _p(1602, 'reference [%]', 'int16', -1, 'confirmed'),
-    _p(1603, 'status word', 'uint16', 0, 'inferred'),
-    _p(1612, 'motor voltage [V]', 'uint16', -1, 'inferred'),
-    _p(1613, 'frequency [Hz]', 'uint16', -1, 'inferred'),
-    _p(1614, 'motor current [A]', 'int32', -2, 'confirmed'),
-    _p(1618, 'motor thermal [%]', 'uint8', 0, 'inferred'),
-    _p(1630, 'DC link voltage [V]', 'uint16', 0, 'inferred'),
-    _p(1690, 'alarm word', 'uint32', 0, 'inferred'),
-    _p(1692, 'warning word', 'uint32', 0, 'open'),
-    _p(1694, 'extended status word', 'uint32', 0, 'open'),
-    ParameterSpec(3, 'regional settings', 'uint8', 0, 'manual 004 example 5.5.5 (PNU 3)'),
-    _p(124, 'motor current [A]', 'uint32', -2, 'inferred; manual 004 section 6.2.1'),
-    _p(381, 'quick stop ramp time [s]', 'uint32', -2, 'inferred'),
-    ParameterSpec(341, 'ramp 1 ramp-up time [s]', 'uint32', -2, 'manual 004 par. 3-41'),
-    ParameterSpec(342, 'ramp 1 ramp-down time [s]', 'uint32', -2,
-                  'manual 004 par. 3-42, example 5.5.4'),
-    ParameterSpec(734, 'process PI integral time [s]', 'uint32', -2,
-                  'manual 004 example 5.5.6 (65535 = 655.35 s)'),
-)}
+# Every parameter known of the FC 51, with its source (:mod:`.fc51_parameters`).
+PARAMETERS: Dict[int, ParameterSpec] = FC51_PARAMETERS
+# Holding registers of the process data (section 5.2.8): 50000 CTW, 50010 REF, 50200 STW,
+# 50210 MAV (frame address = number - 1); a parameter number mapping onto them is refused.
+PROCESS_REGISTERS = (49999, 50009, 50199, 50209)
 
 # What the bridge polls, per model (the names are the DeviceReading fields they fill).
 READOUTS: Dict[str, Dict[str, int]] = {
@@ -159,8 +131,7 @@ DATA = DriveFamilyData(
     index_register=REGISTER_INDEX, eeprom_coil=COIL_EEPROM,
     identify_parameter=1540, version_parameter=1543, model_from_type=model_from_type,
     timeout_time_parameter=803, timeout_function_parameter=804,
-    parameter_label=parameter_label,
-    is_setting=lambda number: number // 100 not in (15, 16))  # groups 15/16: read-only info
+    parameter_label=parameter_label, process_registers=PROCESS_REGISTERS)
 
 COMMS_TIMEOUT_FUNCTION = Setting(
     'comms_timeout_function', int, -1,

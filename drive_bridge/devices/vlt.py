@@ -12,7 +12,8 @@ from typing import Dict, Optional
 from drive_bridge.devices.contracts import Family
 from drive_bridge.devices.drive import (
     COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile, make_drive_simulator)
-from drive_bridge.devices.parameters import ParameterSpec, TEXT, VLT_CONVERSION_FACTORS
+from drive_bridge.devices.parameters import ParameterSpec, VLT_CONVERSION_FACTORS
+from drive_bridge.devices.vlt_parameters import VLT_PARAMETERS
 from drive_bridge.settings import Setting
 
 FAMILY = 'vlt'
@@ -29,23 +30,9 @@ TEXT_READ_INDEX = 0x0400  # "Text Blocks": IND before a text read
 TEXT_WRITE_INDEX = 0x0500  # example 6: "Write IND with 0500 to perform a text write"
 
 
-def _p(number: int, name: str, data_type: str, conversion: int, source: str,
-       characters: int = 20) -> ParameterSpec:
-    return ParameterSpec(number, name, data_type, conversion, source, characters)
-
-
-PARAMETERS: Dict[int, ParameterSpec] = {spec.number: spec for spec in (
-    _p(104, 'motor frequency [Hz]', 'uint16', 0, 'manual 003 example 4 (data type 6)'),
-    _p(514, 'motor current [A]', 'uint32', -2, 'manual 003 example 5 (data type 7)'),
-    _p(520, 'motor current [A]', 'uint32', -2,
-       'protocols.md: VLT 5000 FC-protocol example (5.24 A); open per model'),
-    _p(533, 'display text 1', TEXT, 0, 'manual 003 example 6 (VLT 6000 only)'),
-    _p(538, 'alarm word', 'uint32', 0, 'protocols.md (confirmed number, type inferred)'),
-    _p(540, 'warning word', 'uint32', 0, 'protocols.md (confirmed number, type inferred)'),
-    _p(541, 'extended status word', 'uint32', 0,
-       'protocols.md (confirmed number, type inferred)'),
-    _p(953, 'communication warning word', 'uint16', 0, 'protocols.md (confirmed number)'),
-)}
+# Every parameter known of each model, with its source (:mod:`.vlt_parameters`).
+PARAMETERS: Dict[int, ParameterSpec] = {
+    number: spec for table in VLT_PARAMETERS.values() for number, spec in table.items()}
 
 # Readouts per model: the option card manual (a VLT 6000 manual) reads motor current from
 # par. 514; the VLT 5000 FC-protocol example reads it from par. 520. Overridable per device
@@ -92,7 +79,7 @@ DATA = DriveFamilyData(
     index_register=REGISTER_IND, eeprom_coil=COIL_EEPROM,
     timeout_register=REGISTER_MODBUS_TIMEOUT, drive_link_timeout_register=REGISTER_DRIVE_TIMEOUT,
     text_read_index=TEXT_READ_INDEX, text_write_index=TEXT_WRITE_INDEX,
-    is_setting=lambda number: not 500 <= number < 600 and number != 953)  # 5xx: readouts
+    model_parameters=VLT_PARAMETERS)
 
 DRIVE_LINK_TIMEOUT = Setting(
     'drive_link_timeout', float, 0.0,

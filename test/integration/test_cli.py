@@ -47,7 +47,7 @@ def test_status_of_a_drive_and_of_a_starter(line):
 
 def test_get_and_set_with_conversion_and_units(line):
     code, out = run('get', *bus(line), '--family', 'fc', '--address', 1, '3-41')
-    assert code == 0 and '3-41 = 3.0' in out and 'ramp 1 ramp-up time [s]' in out
+    assert code == 0 and '3-41 = 3.0' in out and 'Ramp 1 Ramp-up Time' in out
     code, out = run('set', *bus(line), '--family', 'fc', '--address', 1, '3-41', '4.25')
     assert code == 0 and '3-41 = 4.25 (read back)' in out
     assert line.devices[1].model.parameters[341] == 425  # raw value, conversion index -2

@@ -124,18 +124,13 @@ def test_every_vlt_py_parameter_and_readout_is_in_a_model_table():
             assert VLT_PARAMETERS[model][number].setting is False
 
 
-def test_fc_py_is_setting_agrees_with_the_table():
-    different = [spec.label for spec in FC_SPECS if fc.DATA.is_setting(spec.number)
-                 != spec.setting]
-    assert different == []
-
-
-def test_where_vlt_py_is_setting_disagrees_with_the_table():
-    # Reported to the lead: vlt.py treats all of 5xx as readouts and 6xx as settings; the
-    # manuals make 533 Display Text a written value and 621-631 nameplate texts readouts.
-    different = sorted({spec.number for spec in VLT_SPECS
-                        if vlt.DATA.is_setting(spec.number) != spec.setting})
-    assert different == [533] + list(range(621, 632))
+def test_backups_take_the_settings_from_the_tables():
+    assert fc.DATA.settings('fc51') == sorted(
+        spec.number for spec in FC_SPECS if spec.setting)
+    vlt6000 = vlt.DATA.settings('vlt6000')
+    assert 533 in vlt6000  # Display Text is written, so it is backed up
+    assert not set(range(621, 632)) & set(vlt.DATA.settings('vlt5000'))  # nameplate texts
+    assert all(VLT_PARAMETERS['vlt6000'][number].setting for number in vlt6000)
 
 
 def test_vlt6000_entries_outside_the_option_cards_register_map():
