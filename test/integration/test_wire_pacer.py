@@ -7,6 +7,9 @@ generous ceilings on the best of several runs, so that they hold on a loaded mac
 
 from contextlib import contextmanager
 import os
+import signal
+import subprocess
+import sys
 import time
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
@@ -215,3 +218,30 @@ def test_ap_ascii_through_the_pacer_without_the_gap_rule():
     total_bytes = sum(len(frame.data) for frame in frames)
     assert elapsed_s >= total_bytes * timing.char_s - 1e-4
     assert counters.gap_violations == 0 and counters.collisions == 0
+
+
+def test_the_simulator_cli_puts_a_pacer_in_front_of_its_pty(tmp_path):
+    link = str(tmp_path / 'ttyPACED')
+    simulator = subprocess.Popen(
+        [sys.executable, '-m', 'drive_bridge.sim.cli', '--device', 'mcd500:20', '--pace',
+         '9600:E:1', '--link', link], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+        text=True)
+    try:
+        lines = []
+        for line in simulator.stdout:
+            lines.append(line.strip())
+            if line.startswith('ready:'):
+                break
+        assert 'paced: 9600 baud 8E1 (11 bits), gap rule on' in lines
+        assert f'link: {link}' in lines
+        timing = LineTiming(9600, 'E', 1)
+        with rtu_master(link, 9600, 0.5) as master:
+            started = time.monotonic()
+            assert len(master.execute(20, ReadRegisters(2, 6))) == 6
+            assert time.monotonic() - started >= 25 * timing.char_s + timing.gap_s - 1e-4
+    finally:
+        simulator.send_signal(signal.SIGTERM)
+        output = simulator.communicate(timeout=10)[0]
+    assert simulator.returncode == 0
+    assert 'line: 1 frames from the master, 1 from the devices, 0 gap violations, ' \
+        '0 collisions' in output

@@ -1,6 +1,7 @@
 """Unit tests of the wire pacer's timing model, with the time passed in (a fake clock)."""
 
 from drive_bridge.protocol import rtu
+from drive_bridge.sim.cli import parse_pace
 from drive_bridge.sim.wire_pacer import (
     COLLISION, GAP_VIOLATION, GLUED, LineTiming, MASTER, OK, SLAVE, transactions, wire_fraction,
     WireFrame, WireLine)
@@ -221,3 +222,13 @@ def test_transactions_skip_lost_and_unanswered_frames():
 def test_unknown_sender_is_refused():
     with pytest.raises(ValueError, match='sender must be'):
         WireLine(TIMING).transmit('both', b'x', 0.0)
+
+
+def test_the_simulator_pace_option():
+    assert parse_pace('19200:E:1') == LineTiming(19200, 'E', 1, gap_rule=True)
+    assert parse_pace('9600') == LineTiming(9600, 'E', 1)
+    assert parse_pace('9600:N') == LineTiming(9600, 'N', 2)  # Modbus: 8N2
+    assert parse_pace('9600', 'ap_ascii') == LineTiming(9600, 'N', 1, gap_rule=False)
+    for bad in ('fast', '9600:X', '9600:E:3', '9600:E:1:1', '0'):
+        with pytest.raises(SystemExit, match='--pace'):
+            parse_pace(bad)
