@@ -53,6 +53,7 @@ COLLISION = 'collision'  # overlapped a frame of the other side
 MAX_INNER_GAP_CHARS = 1.5  # Modbus RTU: a longer silence inside a frame breaks it
 MAX_INNER_GAP_FAST_S = 0.00075  # the fixed t1.5 above 19200 baud
 DEFAULT_LOG_SIZE = 10000
+MAX_FRAME_BYTES = 4096  # a longer burst without a silence goes on as a new frame in the log
 ROUNDING_S = 1e-9  # byte times add up one by one: a silence this much short still counts
 
 
@@ -217,7 +218,7 @@ class WireLine:
     def _frame_for(self, sender: str, start_s: float) -> _Frame:
         """Return the frame a byte of ``sender`` starting at ``start_s`` belongs to."""
         frame = self._current[sender]
-        if frame is not None:
+        if frame is not None and len(frame.data) < MAX_FRAME_BYTES:
             silence_s = start_s - frame.end_s
             if silence_s <= 0 or (frame is self._latest and silence_s < self.timing.gap_s):
                 if self.timing.gap_rule and silence_s > self.timing.inner_gap_s:

@@ -211,6 +211,16 @@ def test_the_log_keeps_the_newest_frames():
     assert line.counters.frames == {MASTER: 3, SLAVE: 3}
 
 
+def test_an_endless_burst_is_logged_in_bounded_frames():
+    line = WireLine(LineTiming(9600, 'N', 1, gap_rule=False))
+    line.transmit(MASTER, bytes(5000), 0.0)
+    assert [len(frame.data) for frame in line.frames()] == [4096, 904]
+    assert len(received(line, 10.0)[SLAVE]) == 5000
+    line = WireLine(TIMING)  # with the gap rule it is no frame at all
+    line.transmit(MASTER, bytes(5000), 0.0)
+    assert received(line, 10.0)[SLAVE] == b''
+
+
 def test_transactions_skip_lost_and_unanswered_frames():
     request = WireFrame(MASTER, 0.0, 0.01, REQUEST)
     reply = WireFrame(SLAVE, 0.02, 0.04, REPLY)
