@@ -1,12 +1,17 @@
 """
-Benchmark: bus throughput against the wire-time limit at 9600 and 19200 baud, 8E1.
+Benchmark: bus throughput against the wire-time limit at 9600 and 19200 baud, 8E1 timing.
 
-The simulator holds every reply back until the request and the reply would have crossed a
-real 8E1 line (3.5-character gaps included), so a pty behaves like a paced wire. Prints
-achieved transactions/s as a fraction of the wire limit, and the ratio to a naive loop
-that reads each of the six status values with its own pymodbus request.
-Both serial engines are measured: the native length-aware RTU engine (the default) and
-pymodbus's serial client (``serial_engine: pymodbus``).
+The master talks to the simulator (a child process) through a wire pacer in this process
+(:mod:`drive_bridge.sim.wire_pacer`), not the simulator's own reply pacing: every byte takes
+its 8E1 wire time (11 bits), the line is half duplex, and a frame that does not follow 3.5
+characters of silence is not recognised, so a master can lose throughput on the wire but
+never gain it. The pty itself runs 8N2.
+Prints, per serial engine, achieved transactions/s as a fraction of the wire limit (from the
+master's count and from the pacer's frame log), gap violations and collisions, and the ratio
+to a naive loop that reads each of the six status values with its own pymodbus request and
+sleeps the gap after each reply itself (pymodbus does not keep it: without the sleep every
+second request is glued to the reply before it and lost). A native master that does not keep
+the gap (``frame_gap_s`` 0) shows what breaking the rule costs.
 Run: .venv/bin/python bench/bus_throughput.py [seconds per case]
 """
 
@@ -15,89 +20,105 @@ import time
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices.mcd import McdProfile
-from drive_bridge.protocol import rtu
+from drive_bridge.errors import TransportError
 from drive_bridge.protocol.requests import ReadRegisters
-from drive_bridge.sim.mcd_device import make_mcd_server
-from drive_bridge.sim.modbus_server import WireTiming
-from drive_bridge.transport.modbus import (
-    LinkSettings, ModbusTransport, PYMODBUS_VERSION, wire_time_s)
+from drive_bridge.sim.wire_pacer import LineTiming
+from drive_bridge.transport.modbus import LinkSettings, ModbusTransport, PYMODBUS_VERSION
 from drive_bridge.transport.protocols import make_transport
+from paced_line import PacedSimulator
 
 UNITS = (20, 21, 22)
 REQUEST_BYTES = 8
 BATCH_REPLY_BYTES = 5 + 2 * 6
-SINGLE_REPLY_BYTES = 5 + 2
 
 
-def wire_limit_per_s(baudrate: int, reply_bytes: int) -> float:
-    """Return transactions/s a perfect master could reach on an 8E1 line."""
-    return 1.0 / wire_time_s(LinkSettings(baudrate=baudrate, parity='E'), REQUEST_BYTES,
-                             reply_bytes)
+def open_line(baudrate: int) -> PacedSimulator:
+    """Start three simulated MCD 500 behind a pacer with 8E1 timing."""
+    return PacedSimulator([f'mcd500:{unit}' for unit in UNITS], LineTiming(baudrate, 'E', 1))
 
 
-def start_server(baudrate: int):
-    server = make_mcd_server(dict.fromkeys(UNITS, 'mcd500'),
-                             wire=WireTiming(baudrate, 'E', 1))
-    server.open_pty()
-    server.start()
-    return server
+def master_settings(line: PacedSimulator) -> LinkSettings:
+    """Return the master's link: the pty takes parity N (8N2: 11 bits as 8E1)."""
+    return LinkSettings(port=line.path, baudrate=line.timing.baudrate, parity='N',
+                        timeout_s=0.5)
 
 
-def bench_bus(baudrate: int, seconds: float, engine: str) -> tuple:
-    """Poll three devices as fast as the bus allows; return (transactions/s, values/s)."""
-    server = start_server(baudrate)
-    settings = LinkSettings(port=server.pty_path, baudrate=baudrate, parity='N',
-                            timeout_s=0.5)  # the pty takes N; the wire timing is 8E1
-    gap_s = rtu.frame_gap_s(baudrate, 'E', 1)
+def wire_limit_per_s(timing: LineTiming, reply_bytes: int) -> float:
+    """Return transactions/s a perfect master could reach (request, reply, two gaps)."""
+    return 1.0 / timing.transaction_s(REQUEST_BYTES, reply_bytes)
+
+
+def bench_bus(baudrate: int, seconds: float, engine: str, keep_gap: bool = True) -> dict:
+    """Poll three devices as fast as the bus allows; return the master's and the wire's rate."""
+    line = open_line(baudrate)
+    gap_s = line.timing.gap_s if keep_gap else 0.0
     specs = [DeviceSpec(f'd{unit}', unit, McdProfile('mcd500'), poll_rate_hz=100.0)
              for unit in UNITS]
-    bus = BusMaster(make_transport(settings, {'serial_engine': engine}), specs,
-                    BusTiming(frame_gap_s=gap_s))
+    bus = BusMaster(make_transport(master_settings(line), {'serial_engine': engine}), specs,
+                    BusTiming(frame_gap_s=gap_s, offline_after=1000))
     bus.run_once()  # connect
     for _ in range(6):  # warm up
         bus.run_once()
-    before = sum(int(bus.snapshot(f'd{u}').stats['transactions']) for u in UNITS)
+    before = bus.transaction_count() - errors(bus)
     started = time.monotonic()
     while time.monotonic() - started < seconds:
         bus.run_once()
-    elapsed = time.monotonic() - started
-    after = sum(int(bus.snapshot(f'd{u}').stats['transactions']) for u in UNITS)
+    ended = time.monotonic()
+    done = bus.transaction_count() - errors(bus) - before
     bus.shutdown(stop_motors=False)
-    server.stop()
-    rate = (after - before) / elapsed
-    return rate, rate * 6
+    figures = line.wire_figures(started, ended)
+    counters = line.pacer.counters()
+    line.close()
+    return {'rate': done / (ended - started), 'log_fraction': figures['fraction'],
+            'violations': counters.gap_violations, 'collisions': counters.collisions}
 
 
-def bench_naive(baudrate: int, seconds: float) -> float:
-    """Read each of the six values with its own pymodbus request; return values/s."""
-    server = start_server(baudrate)
-    transport = ModbusTransport(LinkSettings(port=server.pty_path, baudrate=baudrate,
-                                             parity='N', timeout_s=0.5))
+def errors(bus: BusMaster) -> int:
+    """Return the failed transactions of every device."""
+    return sum(int(bus.snapshot(f'd{unit}').stats['errors']) for unit in UNITS)
+
+
+def bench_naive(baudrate: int, seconds: float) -> tuple:
+    """Read each of the six values with its own pymodbus request; return (values/s, errors)."""
+    line = open_line(baudrate)
+    transport = ModbusTransport(master_settings(line))
     transport.connect()
-    values = 0
+    values = failures = 0
     started = time.monotonic()
     while time.monotonic() - started < seconds:
         for unit in UNITS:
             for address in range(2, 8):
-                transport.execute(unit, ReadRegisters(address, 1))
-                values += 1
+                try:
+                    transport.execute(unit, ReadRegisters(address, 1))
+                    values += 1
+                except TransportError:
+                    failures += 1
+                time.sleep(line.timing.gap_s)
     elapsed = time.monotonic() - started
     transport.close()
-    server.stop()
-    return values / elapsed
+    line.close()
+    return values / elapsed, failures
 
 
 def main() -> None:
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 5.0
-    print(f'pymodbus {PYMODBUS_VERSION}; 3 simulated MCD 500, 6 registers per poll, 8E1 wire')
-    print('engine    baud   bus tx/s  wire limit  fraction  values/s  naive values/s  ratio')
+    print(f'pymodbus {PYMODBUS_VERSION}; 3 simulated MCD 500, 6 registers per poll, 8E1 '
+          f'timing through the wire pacer, {seconds:g} s per case')
+    print('engine         baud  master tx/s  wire limit  fraction  log fraction  gap viol.  '
+          'collisions  values/s  naive values/s  ratio')
     for baudrate in (9600, 19200):
-        naive = bench_naive(baudrate, seconds)
-        limit = wire_limit_per_s(baudrate, BATCH_REPLY_BYTES)
-        for engine in ('native', 'pymodbus'):
-            rate, values = bench_bus(baudrate, seconds, engine)
-            print(f'{engine:8s}  {baudrate:5d}  {rate:8.1f}  {limit:10.1f}  {rate / limit:7.1%}'
-                  f'  {values:8.0f}  {naive:14.0f}  {values / naive:5.2f}x')
+        naive, naive_failures = bench_naive(baudrate, seconds)
+        limit = wire_limit_per_s(LineTiming(baudrate, 'E', 1), BATCH_REPLY_BYTES)
+        for engine, keep_gap in (('native', True), ('pymodbus', True), ('native', False)):
+            result = bench_bus(baudrate, seconds, engine, keep_gap)
+            label = engine + ('' if keep_gap else ' no gap')
+            values = result['rate'] * 6
+            print(f'{label:13s}  {baudrate:5d}  {result["rate"]:11.1f}  {limit:10.1f}  '
+                  f'{result["rate"] / limit:8.1%}  {result["log_fraction"]:12.1%}  '
+                  f'{result["violations"]:9d}  {result["collisions"]:10d}  {values:8.0f}  '
+                  f'{naive:14.0f}  {values / naive:5.2f}x')
+        if naive_failures:
+            print(f'  (the naive loop at {baudrate} lost {naive_failures} requests)')
 
 
 if __name__ == '__main__':

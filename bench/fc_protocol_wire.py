@@ -16,10 +16,12 @@ Run: .venv/bin/python bench/fc_protocol_wire.py
 from typing import List, Tuple
 
 from drive_bridge.devices import fc as fc_family
-from drive_bridge.devices.base import ReadCoils, ReadRegisters, WriteCoils
+from drive_bridge.devices.contracts import FixedControl
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.protocol import fc_control, fc_telegram as fcp, rtu
+from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.fc_telegram import FcTelegramRequest
+from drive_bridge.protocol.requests import ReadCoils, ReadRegisters, WriteCoils
 
 ADDRESS = 1
 BAUDRATES = (9600, 19200)
@@ -47,10 +49,30 @@ def modbus_frames(transaction) -> Tuple[bytes, bytes]:
 def modbus_polls(count: int) -> List[List[Tuple[str, bytes, bytes]]]:
     """Return ``count`` consecutive polls of a started FC 51 as (key, request, reply)."""
     profile = DriveProfile(fc_family.DATA, 'fc51')
-    profile.control_word = fc_control.START_WORD  # started: the keepalive write is planned
     profile._identified = True  # past the one-off identification reads
-    return [[(item.key, *modbus_frames(item.transaction)) for item in profile.poll_plan()]
-            for _ in range(count)]
+    started = FixedControl(Command.START, 0x2000)  # the keepalive write is sent
+    return [[(type(request).__name__, *modbus_frames(request))
+             for request in cycle_requests(profile, started)] for _ in range(count)]
+
+
+def cycle_requests(profile, control) -> list:
+    """Return the requests of one poll cycle, answered with zeros."""
+    requests = []
+    cycle = profile.poll(control)
+    try:
+        step = next(cycle)
+        while True:
+            requests.append(step.request)
+            request = step.request
+            if isinstance(request, ReadCoils):
+                result = [False] * request.count
+            elif isinstance(request, ReadRegisters):
+                result = [0] * request.count
+            else:
+                result = None
+            step = cycle.send(result)
+    except StopIteration:
+        return requests
 
 
 def fc_exchange(request: FcTelegramRequest, double_word: bool) -> Tuple[bytes, bytes]:
@@ -70,9 +92,9 @@ def line_time_ms(exchanges, baudrate: int, gap_characters: float) -> float:
 
 def main() -> None:
     polls = modbus_polls(len(fc_family.READOUTS['fc51']) - 1)  # one full rotation
-    print('Modbus RTU, one poll of a started FC 51 (DriveProfile.poll_plan):')
+    print('Modbus RTU, one poll of a started FC 51 (DriveProfile.poll):')
     for key, request, reply in polls[0]:
-        print(f'  {key:14s} request {len(request):2d} B  reply {len(reply):2d} B')
+        print(f'  {key[:40]:40s} request {len(request):2d} B  reply {len(reply):2d} B')
     rotating = sorted({len(request) + len(reply) for poll in polls
                        for key, request, reply in poll[3:]})
     print(f'  rotating readouts over one rotation: {rotating} bytes per transaction')

@@ -8,6 +8,7 @@ Examples::
     drive_bridge_sim --device fc51:1 --device mcd500:20 --link /tmp/ttyLINE
     drive_bridge_sim --protocol ap_ascii --device mcd500:20 --device mcd3000:21
     drive_bridge_sim --lvsg mcd202:0:100 --lvsg mcd201:10:110:basic --no-pty --tcp 5020
+    drive_bridge_sim --device mcd500:20 --pace 19200:E:1 --link /tmp/ttyMCD  # a paced wire
 
 With ``--console`` (default when standard input is a terminal) it reads commands:
 ``trip ADDR CODE`` (MCD trip code; FC: alarm word bit, 5 = over current), ``hand ADDR
@@ -15,7 +16,10 @@ on|off`` (MCD Hand On; FC local operation), ``silent ADDR on|off``, ``fault ADDR
 [COUNT]`` (the next replies; Modbus: crc, no_reply, slow, exception, garbage, truncated,
 wrong_address; AP ASCII: nak, bel, silence, garbage, slow), ``status``, ``quit``.
 ``--faults RATE[:KIND,...]`` with ``--fault-seed N`` injects random faults into that share of
-all replies, reproducibly.
+all replies, reproducibly. ``--pace BAUD[:PARITY[:STOPBITS]]`` puts a wire pacer
+(:mod:`drive_bridge.sim.wire_pacer`) in front of the pty: every byte takes its wire time at
+that timing, the line is half duplex and, for Modbus, every frame must follow 3.5 characters
+of silence; the pty path printed (and ``--link``) is then the pacer's.
 """
 
 import argparse
@@ -32,6 +36,7 @@ from drive_bridge.sim.faults import parse_fault_plan
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
+from drive_bridge.sim.wire_pacer import LineTiming, MASTER, SLAVE, WirePacer
 
 
 def parse_device(text: str) -> tuple:
@@ -81,6 +86,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--wire-baud', type=int, default=0,
                         help='hold replies back to the wire time at this baud rate')
     parser.add_argument('--wire-parity', choices=('N', 'E', 'O'), default='E')
+    parser.add_argument('--pace', default='', metavar='BAUD[:PARITY[:STOPBITS]]',
+                        help='put a wire pacer with this timing in front of the pty (parity '
+                             'E, or N for AP ASCII; Modbus RTU gap rule for Modbus)')
     parser.add_argument('--start-time', type=float, default=3.0, help='MCD soft start, s')
     parser.add_argument('--stop-time', type=float, default=2.0, help='MCD soft stop, s')
     parser.add_argument('--flc', type=float, default=100.0, help='MCD motor FLC, amperes')
@@ -99,6 +107,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--fault-slow', type=float, default=0.1,
                         help="delay of a 'slow' reply, seconds (keep it under the timeout)")
     return parser
+
+
+def parse_pace(text: str, protocol: str = 'modbus') -> LineTiming:
+    """Parse ``BAUD[:PARITY[:STOPBITS]]`` into the pacer's timing for ``protocol``."""
+    parts = text.split(':')
+    ascii_line = protocol == 'ap_ascii'
+    try:
+        if len(parts) > 3:
+            raise ValueError('too many fields')
+        baudrate = int(parts[0])
+        parity = parts[1] if len(parts) > 1 else ('N' if ascii_line else 'E')
+        stopbits = int(parts[2]) if len(parts) > 2 else (
+            1 if ascii_line or parity != 'N' else 2)
+        return LineTiming(baudrate, parity, stopbits, gap_rule=not ascii_line)
+    except ValueError as error:
+        raise SystemExit(f'drive_bridge_sim: --pace {text!r}: {error}; give '
+                         'BAUD[:PARITY[:STOPBITS]], e.g. 19200:E:1') from None
 
 
 def build_server(args: argparse.Namespace):
@@ -225,15 +250,22 @@ def _describe(unit: int, device, now: float) -> str:
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the simulator until SIGINT/SIGTERM or ``quit``."""
     args = build_parser().parse_args(argv)
+    pacer = _pacer(args)
     server = build_server(args)
     if not args.no_pty:
-        print(f'pty: {server.open_pty(args.link)}', flush=True)
+        path = server.open_pty('' if pacer else args.link)
+        if pacer:
+            path = pacer.open_pty(path, args.link)
+            print(f'paced: {pacer.timing.describe()}', flush=True)
+        print(f'pty: {path}', flush=True)
         if args.link:
             print(f'link: {args.link}', flush=True)
     if args.tcp is not None and isinstance(server, ModbusSimServer):
         print(f'tcp: {args.host}:{server.open_tcp(args.host, args.tcp, args.framing)} '
               f'({args.framing})', flush=True)
     server.start()
+    if pacer:
+        pacer.start()
     served = [f'{m}@{u}' for m, u in args.device] + \
         [f'{m} in {i} out {o} ({kind})' for i, (m, o, kind) in args.lvsg]
     print('ready: ' + ', '.join(served), flush=True)
@@ -245,8 +277,29 @@ def main(argv: Optional[List[str]] = None) -> int:
         threading.Thread(target=_read_console, args=(server, done), daemon=True).start()
     while not done.wait(0.5):
         pass
+    if pacer:
+        pacer.stop()
+        print(describe_line(pacer), flush=True)
     server.stop()
     return 0
+
+
+def _pacer(args: argparse.Namespace) -> Optional[WirePacer]:
+    """Return the wire pacer of ``--pace``, or None."""
+    if not args.pace:
+        return None
+    if args.no_pty or args.wire_baud:
+        raise SystemExit('drive_bridge_sim: --pace paces the pty: it does not mix with '
+                         '--no-pty or --wire-baud')
+    return WirePacer(parse_pace(args.pace, args.protocol))
+
+
+def describe_line(pacer: WirePacer) -> str:
+    """Return the pacer's counters in one line."""
+    counters = pacer.counters()
+    return (f'line: {counters.frames[MASTER]} frames from the master, '
+            f'{counters.frames[SLAVE]} from the devices, {counters.gap_violations} gap '
+            f'violations, {counters.collisions} collisions')
 
 
 def _read_console(server: ModbusSimServer, done: threading.Event) -> None:
