@@ -13,11 +13,11 @@ import sys
 import time
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
-from drive_bridge.devices.base import AsciiRequest, ReadRegisters
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import NoResponse
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.crc import crc_ok
+from drive_bridge.protocol.requests import AsciiRequest, ReadRegisters
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.mcd_device import make_mcd_server
 from drive_bridge.sim.wire_pacer import (
