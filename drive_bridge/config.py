@@ -174,6 +174,8 @@ def build_config(bus_values: Mapping[str, Any],
     names = check_device_names(bus['devices'])
     devices = [build_device(name, device_values.get(name, {}), bus['protocol'])
                for name in names]
+    options = {setting.name: bus[setting.name] for setting in spec.settings}
+    _check_protocol_addresses(devices, spec, options)
     _check_unique_addresses(devices)
     link = LinkSettings(
         protocol=bus['protocol'], port=bus['port'], host=bus['host'],
@@ -186,7 +188,6 @@ def build_config(bus_values: Mapping[str, Any],
                        command_deadline_s=bus['command_deadline'],
                        transaction_timeout_s=bus['timeout'],
                        slow_reply_s=bus['timeout'] / 2)
-    options = {setting.name: bus[setting.name] for setting in spec.settings}
     return BridgeConfig(link, timing, devices, bus['diagnostics_period'], options)
 
 
@@ -286,6 +287,19 @@ def build_device(name: str, values: Mapping[str, Any], protocol: str) -> DeviceC
     except ConfigError as error:
         raise ConfigError(f'device {name!r}: {error}') from None
     return device
+
+
+def _check_protocol_addresses(devices: List[DeviceConfig], spec, options: Dict[str, Any]) \
+        -> None:
+    """Refuse an address the protocol cannot carry (FC protocol: 1-126, or 1-31)."""
+    if spec.address_range is None:
+        return
+    low, high = spec.address_range(options)
+    for device in devices:
+        if not low <= device.address <= high:
+            raise ConfigError(f'parameter {device.name + ".address"!r} = {device.address} is '
+                              f'out of range for protocol {spec.name!r}'
+                              + (f' ({options})' if options else '') + f': allowed {low}-{high}')
 
 
 def _check_unique_addresses(devices: List[DeviceConfig]) -> None:

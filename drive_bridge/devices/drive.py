@@ -509,10 +509,16 @@ def make_drive_profile(data: DriveFamilyData) -> Callable[[str, str, Mapping[str
     def make(model: str, protocol: str, options: Mapping[str, Any]) -> DeviceProfile:
         overrides = {'motor_current': options['current_parameter']} \
             if options.get('current_parameter') else {}
-        return DriveProfile(data, model, options.get('current_scale', 1.0),
-                            options.get('comms_timeout', 0.0),
-                            options.get('comms_timeout_function', -1), overrides,
-                            options.get('drive_link_timeout', 0.0))
+        common = (data, model, options.get('current_scale', 1.0),
+                  options.get('comms_timeout', 0.0), options.get('comms_timeout_function', -1),
+                  overrides)
+        if protocol == 'fc_protocol':
+            from drive_bridge.devices.fc_protocol_drive import FcProtocolDriveProfile
+            if options.get('drive_link_timeout', 0.0) > 0:
+                raise ConfigError("drive_link_timeout is the Modbus option card's register 3: "
+                                  'on the FC protocol there is no card; leave it at 0')
+            return FcProtocolDriveProfile(*common)
+        return DriveProfile(*common, options.get('drive_link_timeout', 0.0))
     return make
 
 
