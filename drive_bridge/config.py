@@ -69,6 +69,15 @@ COMMON_DEVICE_SETTINGS: Tuple[Setting, ...] = (
             'factor on the reported current (MCD5-0068B and smaller: 0.1)',
             low=0.001, high=1000.0),
 )
+# Every family takes these; they go to the profile with the family's own settings.
+PROFILE_SETTINGS: Tuple[Setting, ...] = (
+    Setting('readout_period', float, 1.0,
+            'seconds between two polls that read the slow readouts (FC: frequency, thermal '
+            'load and status words in turn; MCD: product and protocol registers 40007-40008, '
+            'the trip code over AP ASCII; LVSG: operating parameters 1-2); the fast values '
+            '(status, current, speed) are read every poll; 0 = every poll',
+            low=0.0, high=3600.0),
+)
 # Families that take a speed reference (drives) take these too.
 REFERENCE_SETTINGS: Tuple[Setting, ...] = (
     Setting('speed_reference', float, 0.0, 'drives: percent, FC scaling',
@@ -81,13 +90,14 @@ REFERENCE_SETTINGS: Tuple[Setting, ...] = (
 
 def device_settings(family: Family) -> Tuple[Setting, ...]:
     """Return every setting a device of ``family`` takes."""
-    return COMMON_DEVICE_SETTINGS + (REFERENCE_SETTINGS if family.reference else ()) + \
-        tuple(family.settings)
+    return COMMON_DEVICE_SETTINGS + PROFILE_SETTINGS + \
+        (REFERENCE_SETTINGS if family.reference else ()) + tuple(family.settings)
 
 
 def all_device_settings() -> Dict[str, Setting]:
     """Return every device setting of any family, by name."""
-    settings = {setting.name: setting for setting in COMMON_DEVICE_SETTINGS + REFERENCE_SETTINGS}
+    settings = {setting.name: setting
+                for setting in COMMON_DEVICE_SETTINGS + PROFILE_SETTINGS + REFERENCE_SETTINGS}
     for family in FAMILIES.values():
         for setting in family.settings:
             settings.setdefault(setting.name, setting)

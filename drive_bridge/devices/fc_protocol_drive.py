@@ -24,7 +24,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, ParameterAccess, ParameterOptions, ParameterPlan, PollCycle,
-    PollStep)
+    PollStep, SlowReadouts)
 from drive_bridge.devices.drive import (
     ALWAYS_READ, control_word_for, DriveFamilyData, FcProfileDrive)
 from drive_bridge.devices.parameters import (
@@ -44,14 +44,15 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
 
     def __init__(self, data: DriveFamilyData, model: str = 'auto', current_scale: float = 1.0,
                  comms_timeout_s: float = 0.0, comms_timeout_function: int = -1,
-                 readout_overrides: Optional[Dict[str, int]] = None):
+                 readout_overrides: Optional[Dict[str, int]] = None,
+                 slow_readouts: Optional[SlowReadouts] = None):
         if comms_timeout_s > 0 and data.timeout_time_parameter is None:
             raise ConfigError(
                 f'comms_timeout: a {data.name} drive on the FC protocol has no option card '
                 "register for it; set the drive's own bus timeout at the drive (VLT 5000/6000: "
                 'par. 555 and 556, check your manual) and leave comms_timeout at 0')
         super().__init__(data, model, current_scale, comms_timeout_s, comms_timeout_function,
-                         readout_overrides)
+                         readout_overrides, slow_readouts)
         self._turn = 0
         self._follow_up: List[str] = []
 
@@ -82,12 +83,12 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
         return self.reading(reply.pcd1, reply.pcd2, control)
 
     def _next_readout(self) -> str:
-        """Return the readout whose turn it is: follow-ups, current every other poll, others."""
+        """Return the readout whose turn it is: follow-ups, then current and slow ones."""
         if self._follow_up:
             return self._follow_up.pop(0)
         self._turn += 1
         current = [name for name in ALWAYS_READ if name in self.readouts]
-        if current and self._turn % 2:
+        if current and self._turn % 2:  # the current at least every other telegram
             return current[0]
         return self.next_rotating_readout() or current[0]
 
