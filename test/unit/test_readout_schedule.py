@@ -103,6 +103,6 @@ def test_lvsg_current_and_temperature_take_turns_product_and_state_once_a_period
 
 
 def test_the_readout_period_is_a_device_setting_of_every_family():
-    config = build_config({'devices': ['a']}, {'a': {'family': 'fc', 'address': 1,
-                                                      'readout_period': 2.5}})
+    device = {'family': 'fc', 'address': 1, 'readout_period': 2.5}
+    config = build_config({'devices': ['a']}, {'a': device})
     assert config.devices[0].make_spec().profile.slow_readouts.period_s == 2.5
