@@ -137,6 +137,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         self.identity: Dict[str, str] = {}
         self._identified = data.identify_parameter is None
         self._values: Dict[str, object] = {}
+        self._readouts: Dict[str, Dict[str, ParameterSpec]] = {}
         self._rotation = 0
         self.slow_readouts = slow_readouts or SlowReadouts(0.0)
 
@@ -149,10 +150,13 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
 
     @property
     def readouts(self) -> Dict[str, ParameterSpec]:
-        """Return readout name -> parameter spec for the resolved model."""
-        numbers = dict(self.data.readouts[self.default_model], **self.readout_overrides)
-        return {name: self.data.spec(number, model=self.default_model)
-                for name, number in numbers.items()}
+        """Return readout name -> parameter spec for the resolved model (built once a model)."""
+        model = self.default_model
+        if model not in self._readouts:
+            numbers = dict(self.data.readouts[model], **self.readout_overrides)
+            self._readouts[model] = {name: self.data.spec(number, model=model)
+                                     for name, number in numbers.items()}
+        return self._readouts[model]
 
     @property
     def reading_fields(self) -> FrozenSet[str]:

@@ -94,11 +94,13 @@ class SerialPortTransport(Transport):
         select is the only wake-up while nothing arrives.
         """
         port = self._port
-        data = port.read(count)
-        if data or timeout_s <= 0:
-            return data
-        ready, _, _ = select.select([port], [], [], timeout_s)
-        return port.read(count) if ready else b''
+        if not port.in_waiting:
+            if timeout_s <= 0:
+                return b''
+            ready, _, _ = select.select([port], [], [], timeout_s)
+            if not ready:
+                return b''
+        return port.read(count)
 
     def _await_bytes(self, count: int, char_s: float, deadline: float) -> None:
         """

@@ -9,6 +9,7 @@ polling, no end-of-frame guessing (as libmodbus does). This is the default engin
 Failures are the typed errors of :mod:`drive_bridge.errors`.
 """
 
+import functools
 import time
 from typing import Any
 
@@ -81,7 +82,7 @@ class RtuSerialTransport(SerialPortTransport):
             needed = result.needed
             self._await_bytes(needed - len(buffer), self._char_s, deadline)
 
-    @property
+    @functools.cached_property
     def _char_s(self) -> float:
         return rtu.character_time_s(self.settings.baudrate, self.settings.effective_parity,
                                     self.settings.effective_stopbits)
