@@ -16,7 +16,7 @@ def bus(sim_bus):
     specs = [DeviceSpec('main', 20, McdProfile('auto'), poll_rate_hz=20.0),
              DeviceSpec('aux', 21, McdProfile('mcd202'), poll_rate_hz=20.0),
              DeviceSpec('dead', 22, McdProfile('mcd500'), poll_rate_hz=20.0)]
-    transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.1))
+    transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.3))
     master = BusMaster(transport, specs, BusTiming(backoff_max_s=2.0), listener=events.append)
     master.events = events
     master.start()
@@ -83,7 +83,7 @@ def test_parameters_by_number(bus, sim_bus):
 
 def test_model_mismatch_refuses_commands(sim_bus):
     spec = DeviceSpec('wrong', 21, McdProfile('mcd500'), poll_rate_hz=20.0)
-    transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.1))
+    transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.3))
     master = BusMaster(transport, [spec]).start()
     try:
         assert wait_until(lambda: 'mismatch' in master.snapshot('wrong').status_text, 3.0)

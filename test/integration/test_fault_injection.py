@@ -67,7 +67,7 @@ def test_simulator_cli_takes_a_fault_plan_and_console_faults(tmp_path):
     server.faults.set_plan(FaultPlan())  # no random faults: only the console's
     path = server.open_pty()
     server.start()
-    transport = RtuSerialTransport(LinkSettings(port=path, parity='N', timeout_s=0.1))
+    transport = RtuSerialTransport(LinkSettings(port=path, parity='N', timeout_s=0.3))
     transport.connect()
     try:
         assert 'mcd500' in sim_cli.run_console_command(server, 'fault 20 crc 1')

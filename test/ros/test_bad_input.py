@@ -31,7 +31,7 @@ def sim():
 @pytest.fixture(scope='module')
 def node(sim, tmp_path_factory):
     with running_node(tmp_path_factory.mktemp('params') / 'bad_input.yaml',
-                      {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.1,
+                      {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.3,
                        'diagnostics_period': 0.2}, DEVICES, drives=['conv'],
                       ready=['conv']) as client:
         assert client.wait_state('gone', 'offline', 15.0)

@@ -49,7 +49,7 @@ class Lifecycle:
 @pytest.fixture
 def managed(sim, tmp_path):
     params = write_params(tmp_path / 'managed.yaml',
-                          {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.1,
+                          {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.3,
                            'autostart': False, 'diagnostics_period': 0.2}, DEVICES)
     process = start_node(params)
     client = RosClient(list(DEVICES), drives=['conv'])

@@ -35,7 +35,7 @@ def sim():
 
 def running_node(sim, tmp_path):
     params = write_params(tmp_path / 'safe_stop.yaml',
-                          {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.1}, DEVICES)
+                          {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.3}, DEVICES)
     process = start_node(params)
     client = RosClient(list(DEVICES), drives=['conv'])
     assert client.wait_state('conv', 'ready', 15.0), stop_node(process)
