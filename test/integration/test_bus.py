@@ -40,6 +40,7 @@ def test_dead_device_offline_others_polled(bus):
 
 def test_start_stop_sequence_with_acknowledgement(bus):
     assert wait_until(lambda: bus.snapshot('main').online, 3.0)
+    assert wait_until(lambda: bus.snapshot('dead').online is False, 5.0)  # probes only now
     assert bus.submit_command('main', 'start').result(timeout=3) == \
         'start acknowledged by main (address 20)'
     assert wait_until(lambda: readings(bus, 'main')[-1].state == 'running', 3.0)
