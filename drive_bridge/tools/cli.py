@@ -25,7 +25,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from drive_bridge import config as cfg
 from drive_bridge.bus.device import BusDevice
-from drive_bridge.bus.runner import run_poll, TransactionRunner
+from drive_bridge.bus.runner import retryable, run_poll, TransactionRunner
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceReading, ParameterAccess, ParameterOptions
 from drive_bridge.devices.drive import COIL_STATUS, DriveProfile, PROCESS_COILS
@@ -154,7 +154,7 @@ class Session:
         results = []
         for request in requests:
             try:
-                results.append(self.runner.transact(self.record, request))
+                results.append(self._transact(request))
             except DeviceException as error:
                 what = f' {doing}' if doing else ' it'
                 raise CliError(f'{self.name} refused{what}: '
@@ -165,10 +165,22 @@ class Session:
                 raise CliError(f'{self.name}: {doing}: {error}') from None
         return results
 
+    def _transact(self, request) -> Any:
+        """Run one request; a read is repeated after a lost or garbled reply, as the node does."""
+        attempt = 0
+        while True:
+            try:
+                return self.runner.transact(self.record, request)
+            except TransportError as error:
+                if request.writes or not retryable(error) or \
+                        attempt >= self.config.timing.retries:
+                    raise
+                attempt += 1
+
     def poll(self) -> DeviceReading:
         """Read the device once and return its decoded reading."""
         try:
-            reading = run_poll(self.runner, self.record)
+            reading = run_poll(self.runner, self.record, self.config.timing.retries)
         except DeviceException as error:
             raise CliError(f'{self.name} refused the poll: '
                            f'{self.runner.explain(self.record, error)}') from None
@@ -617,8 +629,8 @@ def probe_session(bus: Dict[str, Any], family: str, address: int,
     """Return a session with a probe device of ``family`` at ``address``, or None."""
     values = {'family': family, 'address': address,
               'model': 'vlt6000' if family == 'vlt' else 'auto'}
-    try:
-        config = cfg.build_config(dict(bus, devices=['probe']), {'probe': values})
+    try:  # no retries: silence at an address means nobody is there
+        config = cfg.build_config(dict(bus, devices=['probe'], retries=0), {'probe': values})
     except ConfigError:
         return None  # e.g. an MCD cannot sit at this address
     return Session(config, config.devices[0], runner)

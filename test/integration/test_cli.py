@@ -52,7 +52,7 @@ def run(*argv):
 
 def bus(line):
     # 115200 baud: the runner keeps a 1.75 ms gap between frames instead of 9600's 4 ms.
-    return ['--port', line.pty_path, '--parity', 'N', '--baudrate', 115200, '--timeout', '0.2',
+    return ['--port', line.pty_path, '--parity', 'N', '--baudrate', 115200, '--timeout', '0.5',
             '--quiet']
 
 
@@ -69,7 +69,7 @@ def writes_to(line, unit):
 def params_file(tmp_path, line, allow_control=True, name='line.yaml'):
     path = tmp_path / name
     path.write_text(yaml.safe_dump({'/**/drive_bridge': {'ros__parameters': {
-        'port': line.pty_path, 'parity': 'N', 'baudrate': 115200, 'timeout': 0.2,
+        'port': line.pty_path, 'parity': 'N', 'baudrate': 115200, 'timeout': 0.5,
         'devices': ['feeder', 'crusher'],
         'feeder': {'family': 'fc', 'model': 'fc51', 'address': 1,
                    'allow_control': allow_control},
@@ -356,6 +356,9 @@ def test_an_older_bare_number_backup_still_restores_with_the_same_checks(
     code, out = run('restore', *bus(line), *FC51, path)
     assert code == 0 and '2 parameters restored' in out
     assert (model(line, 1).parameters[341], model(line, 1).parameters[342]) == (450, 250)
+    assert model(line, 1).eeprom_writes is False  # coil 65 = 0: RAM only
+    assert run('restore', *bus(line), *FC51, '--eeprom', path)[0] == 0
+    assert model(line, 1).eeprom_writes is True  # coil 65 = 1: RAM and EEPROM
     path.write_text('family: fc\nmodel: fc51\nparameters:\n  341: 4.0\n  1614: 2\n')
     assert run('restore', *bus(line), *FC51, path)[0] == 2
     assert 'Motor Current is a readout' in capsys.readouterr().err
@@ -467,7 +470,7 @@ def test_config_file_names_the_bus_and_device(line, tmp_path):
 
 def test_node_picks_the_block_of_a_file_with_two_nodes(line, tmp_path, capsys):
     path = tmp_path / 'two.yaml'
-    block = {'port': line.pty_path, 'parity': 'N', 'timeout': 0.2, 'devices': ['conv']}
+    block = {'port': line.pty_path, 'parity': 'N', 'timeout': 0.5, 'devices': ['conv']}
     path.write_text(yaml.safe_dump({
         'line1': {'drive_bridge': {'ros__parameters': dict(block, conv={
             'family': 'fc', 'model': 'fc51', 'address': 1})}},
@@ -494,7 +497,7 @@ def test_node_picks_the_block_of_a_file_with_two_nodes(line, tmp_path, capsys):
     (['scan', '--addresses', '40-2'], 2, 'must lie within 1-247, low to high'),
     (['status'], 2, 'name the device: --config FILE'),
     (['status', '--family', 'mcd', '--address', 150], 2, 'out of range for family mcd'),
-    (['status', '--family', 'fc', '--address', 9], 1, 'no reply within 0.2 s'),
+    (['status', '--family', 'fc', '--address', 9], 1, 'no reply within 0.5 s'),
     (['restore', '--family', 'fc', '--address', 1, '/nonexistent.yaml'], 2, 'cannot read'),
 ])
 def test_bad_arguments_get_one_clear_line(line, capsys, argv, code, message):
