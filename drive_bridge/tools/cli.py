@@ -20,6 +20,7 @@ writes anything. Progress goes to stderr, and only while stderr is a terminal. E
 import argparse
 from dataclasses import replace
 import sys
+import textwrap
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
@@ -802,7 +803,8 @@ def _subcommand_adder(commands):
     def add(name: str, function, device: bool = True, writes: bool = False):
         summary, description = SUBCOMMANDS[name]
         sub = commands.add_parser(
-            name, help=summary, description=description, epilog=f'example:\n  '
+            name, help=summary, description=textwrap.fill(description, 79),
+            epilog=f'example:\n  '
             f'{EXAMPLES[name]}', formatter_class=argparse.RawDescriptionHelpFormatter)
         sub.set_defaults(function=function)
         bus = sub.add_argument_group('bus (default: from --config, else the node defaults)')
@@ -818,7 +820,7 @@ def _subcommand_adder(commands):
         bus.add_argument('--parity', choices=('N', 'E', 'O'), help='default E')
         bus.add_argument('--stopbits', type=int, choices=(0, 1, 2),
                          help='0 (default): 2 with no parity, 1 with parity')
-        bus.add_argument('--timeout', type=float, help='seconds per transaction')
+        bus.add_argument('--timeout', type=float, help='seconds per transaction (default 0.5)')
         sub.add_argument('--quiet', action='store_true', help='no progress bar')
         if device:
             chosen = sub.add_argument_group('device')
