@@ -60,17 +60,50 @@ def bench_bus(baudrate: int, seconds: float, engine: str, keep_gap: bool = True)
     for _ in range(6):  # warm up
         bus.run_once()
     before = bus.transaction_count() - errors(bus)
-    started = time.monotonic()
-    while time.monotonic() - started < seconds:
-        bus.run_once()
-    ended = time.monotonic()
+    waits = WaitCounter()
+    started, cpu_before = time.monotonic(), time.thread_time()
+    with waits:
+        while time.monotonic() - started < seconds:
+            bus.run_once()
+    ended, cpu_s = time.monotonic(), time.thread_time() - cpu_before
     done = bus.transaction_count() - errors(bus) - before
     bus.shutdown(stop_motors=False)
     figures = line.wire_figures(started, ended)
     counters = line.pacer.counters()
     line.close()
     return {'rate': done / (ended - started), 'log_fraction': figures['fraction'],
-            'violations': counters.gap_violations, 'collisions': counters.collisions}
+            'violations': counters.gap_violations, 'collisions': counters.collisions,
+            'cpu_us': 1e6 * cpu_s / max(1, done), 'waits': waits.count / max(1, done)}
+
+
+class WaitCounter:
+    """Count the bus thread's wake-ups while entered: blocking selects and sleeps."""
+
+    def __init__(self):
+        self.count = 0
+        self._originals = ()
+
+    def __enter__(self) -> 'WaitCounter':
+        import select
+        import threading
+        original_select, original_sleep = select.select, time.sleep
+        bus_thread = threading.current_thread()  # the pacer's thread is not counted
+
+        def counting_select(*args):
+            if threading.current_thread() is bus_thread and args[3:] and args[3]:
+                self.count += 1  # a zero timeout does not sleep
+            return original_select(*args)
+
+        def counting_sleep(seconds):
+            self.count += threading.current_thread() is bus_thread
+            return original_sleep(seconds)
+        select.select, time.sleep = counting_select, counting_sleep
+        self._originals = (original_select, original_sleep)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        import select
+        select.select, time.sleep = self._originals
 
 
 def errors(bus: BusMaster) -> int:
@@ -105,7 +138,7 @@ def main() -> None:
     print(f'pymodbus {PYMODBUS_VERSION}; 3 simulated MCD 500, 6 registers per poll, 8E1 '
           f'timing through the wire pacer, {seconds:g} s per case')
     print('engine         baud  master tx/s  wire limit  fraction  log fraction  gap viol.  '
-          'collisions  values/s  naive values/s  ratio')
+          'collisions  values/s  naive values/s  ratio  CPU us/tx  waits/tx')
     for baudrate in (9600, 19200):
         naive, naive_failures = bench_naive(baudrate, seconds)
         limit = wire_limit_per_s(LineTiming(baudrate, 'E', 1), BATCH_REPLY_BYTES)
@@ -116,7 +149,8 @@ def main() -> None:
             print(f'{label:13s}  {baudrate:5d}  {result["rate"]:11.1f}  {limit:10.1f}  '
                   f'{result["rate"] / limit:8.1%}  {result["log_fraction"]:12.1%}  '
                   f'{result["violations"]:9d}  {result["collisions"]:10d}  {values:8.0f}  '
-                  f'{naive:14.0f}  {values / naive:5.2f}x')
+                  f'{naive:14.0f}  {values / naive:5.2f}x  {result["cpu_us"]:9.0f}  '
+                  f'{result["waits"]:8.1f}')
         if naive_failures:
             print(f'  (the naive loop at {baudrate} lost {naive_failures} requests)')
 

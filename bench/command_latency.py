@@ -25,6 +25,7 @@ from typing import Dict, Optional, Tuple
 from drive_bridge.devices import fc, mcd
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.protocol import fc_control, rtu
+from drive_bridge.protocol.commands import Command
 from drive_bridge.sim.wire_pacer import LineTiming, MASTER
 from paced_line import (
     LINE_DEVICES, node_bus, NodeProcess, PacedSimulator, ros_environment, simulator_devices)
@@ -44,12 +45,13 @@ SEED = 1
 def command_frame(block: Dict, command: str) -> bytes:
     """Return the bytes of the request that carries ``command`` to the device of ``block``."""
     unit = block['address']
+    typed = Command(command)
     if block['family'] == 'mcd':
         return rtu.write_register_request(unit, mcd.REGISTER['command'].address,
-                                          mcd.COMMAND_VALUES[command]).encode()
+                                          mcd.COMMAND_VALUES[typed]).encode()
     write = DriveProfile(fc.DATA, block['model']).process_write(
-        fc_control.COMMAND_WORDS[command])  # speed_reference 0: reference word 0
-    return rtu.write_coils_request(unit, write.address, list(write.values)).encode()
+        fc_control.COMMAND_WORDS[typed], 0)  # speed_reference 0: reference word 0
+    return write.frame(unit).encode()
 
 
 class CommandClient:

@@ -69,6 +69,15 @@ COMMON_DEVICE_SETTINGS: Tuple[Setting, ...] = (
             'factor on the reported current (MCD5-0068B and smaller: 0.1)',
             low=0.001, high=1000.0),
 )
+# Every family takes these; they go to the profile with the family's own settings.
+PROFILE_SETTINGS: Tuple[Setting, ...] = (
+    Setting('readout_period', float, 1.0,
+            'seconds between two polls that read the slow readouts (FC: frequency, thermal '
+            'load and status words in turn; MCD: product and protocol registers 40007-40008, '
+            'the trip code over AP ASCII; LVSG: operating parameters 1-2); the fast values '
+            '(status, current, speed) are read every poll; 0 = every poll',
+            low=0.0, high=3600.0),
+)
 # Families that take a speed reference (drives) take these too.
 REFERENCE_SETTINGS: Tuple[Setting, ...] = (
     Setting('speed_reference', float, 0.0, 'drives: percent, FC scaling',
@@ -81,13 +90,14 @@ REFERENCE_SETTINGS: Tuple[Setting, ...] = (
 
 def device_settings(family: Family) -> Tuple[Setting, ...]:
     """Return every setting a device of ``family`` takes."""
-    return COMMON_DEVICE_SETTINGS + (REFERENCE_SETTINGS if family.reference else ()) + \
-        tuple(family.settings)
+    return COMMON_DEVICE_SETTINGS + PROFILE_SETTINGS + \
+        (REFERENCE_SETTINGS if family.reference else ()) + tuple(family.settings)
 
 
 def all_device_settings() -> Dict[str, Setting]:
     """Return every device setting of any family, by name."""
-    settings = {setting.name: setting for setting in COMMON_DEVICE_SETTINGS + REFERENCE_SETTINGS}
+    settings = {setting.name: setting
+                for setting in COMMON_DEVICE_SETTINGS + PROFILE_SETTINGS + REFERENCE_SETTINGS}
     for family in FAMILIES.values():
         for setting in family.settings:
             settings.setdefault(setting.name, setting)
@@ -174,6 +184,8 @@ def build_config(bus_values: Mapping[str, Any],
     names = check_device_names(bus['devices'])
     devices = [build_device(name, device_values.get(name, {}), bus['protocol'])
                for name in names]
+    options = {setting.name: bus[setting.name] for setting in spec.settings}
+    _check_protocol_addresses(devices, spec, options)
     _check_unique_addresses(devices)
     link = LinkSettings(
         protocol=bus['protocol'], port=bus['port'], host=bus['host'],
@@ -186,7 +198,6 @@ def build_config(bus_values: Mapping[str, Any],
                        command_deadline_s=bus['command_deadline'],
                        transaction_timeout_s=bus['timeout'],
                        slow_reply_s=bus['timeout'] / 2)
-    options = {setting.name: bus[setting.name] for setting in spec.settings}
     return BridgeConfig(link, timing, devices, bus['diagnostics_period'], options)
 
 
@@ -286,6 +297,19 @@ def build_device(name: str, values: Mapping[str, Any], protocol: str) -> DeviceC
     except ConfigError as error:
         raise ConfigError(f'device {name!r}: {error}') from None
     return device
+
+
+def _check_protocol_addresses(devices: List[DeviceConfig], spec, options: Dict[str, Any]) \
+        -> None:
+    """Refuse an address the protocol cannot carry (FC protocol: 1-126, or 1-31)."""
+    if spec.address_range is None:
+        return
+    low, high = spec.address_range(options)
+    for device in devices:
+        if not low <= device.address <= high:
+            raise ConfigError(f'parameter {device.name + ".address"!r} = {device.address} is '
+                              f'out of range for protocol {spec.name!r}'
+                              + (f' ({options})' if options else '') + f': allowed {low}-{high}')
 
 
 def _check_unique_addresses(devices: List[DeviceConfig]) -> None:

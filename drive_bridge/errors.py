@@ -71,9 +71,10 @@ class DeviceException(TransportError):
 
     kind = 'exception'
 
-    def __init__(self, code: int, text: str = ''):
+    def __init__(self, code: int, text: str = '', reply: object = None):
         self.code = code
         self.text = text or f'exception code {code:02d}'
+        self.reply = reply  # the refusal's own reply, where it carries more (FC protocol)
         super().__init__(self.text)
 
 

@@ -1,5 +1,7 @@
 """A fake clock and a scheduler loop for the bus tests (no threads, no real time)."""
 
+import os
+
 
 class FakeClock:
     """Monotonic time that moves only when told to (or when the bus sleeps)."""
@@ -48,3 +50,12 @@ def poll_requests(profile, control=None):
     """Return the first request of a poll cycle of ``profile`` (without running it)."""
     from drive_bridge.devices.contracts import FixedControl
     return next(profile.poll(control or FixedControl())).request
+
+
+_READABLE = os.pipe()
+os.write(_READABLE[1], b'x')  # never read: select always finds it readable
+
+
+def always_readable_fd() -> int:
+    """Return a file descriptor that select always reports readable (for fake ports)."""
+    return _READABLE[0]

@@ -26,22 +26,21 @@ from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Unio
 
 from drive_bridge.bus import deadman
 from drive_bridge.bus.device import BusDevice, DeviceSpec
+from drive_bridge.bus.events import BusEvent
+from drive_bridge.bus.execution import fail, JobRunner
 from drive_bridge.bus.jobs import (
     CommandJob, Job, JobQueue, ParameterJob, SetupJob, StopAllJob)
 from drive_bridge.bus.link import LinkSupervisor
 from drive_bridge.bus.motor import Motion
-from drive_bridge.bus.runner import optional_failure, PollRun, retryable, TransactionRunner
+from drive_bridge.bus.polling import Poller
+from drive_bridge.bus.runner import TransactionRunner
 from drive_bridge.devices.contracts import (
     DeviceReading, ParameterAccess, ParameterOptions, SetupWrites, SpeedReference)
-from drive_bridge.errors import (
-    CommandExpired, CommandRefused, DeviceException, LinkDown, ModelMismatch, MonitorOnly,
-    ProtocolError, TransportError)
+from drive_bridge.errors import CommandExpired, CommandRefused, MonitorOnly
 from drive_bridge.protocol.commands import Command
 from drive_bridge.transport.base import Transport
 
 __all__ = ['BusEvent', 'BusMaster', 'BusTiming', 'DeviceSnapshot', 'DeviceSpec']
-DECODE_ERRORS = (ProtocolError, ValueError, IndexError, KeyError, TypeError)
-SETUP_RETRY_S = 1.0  # a set-up write whose reply was lost is sent again after this pause
 
 
 @dataclass
@@ -82,17 +81,6 @@ class DeviceSnapshot:
     hardware: Dict[str, str] = field(default_factory=dict)
 
 
-@dataclass
-class BusEvent:
-    """What the bus tells its listener: a new reading, or a change of link status."""
-
-    device: str
-    kind: str  # 'reading', 'offline', 'online', 'error' (state unknown), 'notice' (a log line)
-    reading: Optional[DeviceReading] = None
-    message: str = ''
-    stamp_s: float = 0.0  # the bus clock when the reading's poll began
-
-
 class BusMaster:
     """Own one bus: poll, command, track links; see the module docstring."""
 
@@ -114,11 +102,15 @@ class BusMaster:
         self._thread: Optional[threading.Thread] = None
         self._running = False
         self._commands_enabled = True
-        self._poll: Optional[PollRun] = None
         self._link = LinkSupervisor(transport, self.timing.backoff_initial_s,
                                     self.timing.backoff_max_s, clock)
         self._runner = TransactionRunner(transport, self.timing.frame_gap_s,
                                          self.timing.slow_reply_s, clock, sleep)
+        self._poller = Poller(self._runner, self.timing, clock, self._lock, self._emit,
+                              self._link_lost, self._setup_due)
+        self._work = JobRunner(self._runner, self._link, clock, self._lock, self._emit,
+                               self._link_lost, self._devices.values,
+                               lambda: self._commands_enabled)
         self.internal_errors = 0
         self.last_internal_error = ''
 
@@ -186,7 +178,7 @@ class BusMaster:
             command = Command.parse(command) if isinstance(command, str) else command
             with self._lock:
                 device = self._known_device(name)
-                self._admit(device, command)
+                self._work.admit(device, command)
                 deadline = self.clock() + (self.timing.command_deadline_s if deadline_s is None
                                            else deadline_s)
                 self._enqueue(CommandJob(device, deadline, future, command))
@@ -219,7 +211,7 @@ class BusMaster:
                         not device.owner.writes_allowed:
                     raise MonitorOnly(f'{name} is monitor only (allow_control is false): '
                                       f'{plan.label} not sent')
-                self._check_reachable(device)
+                self._work.check_reachable(device)
                 self._enqueue(ParameterJob(device, self.clock() + self._job_time_s(plan),
                                            future, plan))
         except CommandRefused as error:
@@ -327,7 +319,7 @@ class BusMaster:
         with self._lock:
             self._commands_enabled = False
             for job in self._jobs.remove(keep=lambda job: job.urgent):
-                self._fail(job, CommandRefused(f'{reason}: {job.describe()} not sent'))
+                fail(job, CommandRefused(f'{reason}: {job.describe()} not sent'))
             job = StopAllJob(None, self.clock() + timeout_s, reason=reason)
             self._jobs.push_front(job)
         self._wake.set()
@@ -351,33 +343,6 @@ class BusMaster:
             raise CommandRefused(
                 f'unknown device {name!r}: this bus has {", ".join(self._devices)}')
         return device
-
-    def _admit(self, device: BusDevice, command: Command) -> None:
-        """Raise CommandRefused (nothing sent) unless ``command`` may be sent now."""
-        if command not in device.profile.commands:
-            raise CommandRefused(f'{device.name} ({device.profile.family}) has no '
-                                 f'{command.value} command')
-        device.owner.admit(command, self._commands_enabled)
-        if command.stops and device.owner.holds_run:
-            if self._link.error:
-                raise CommandRefused(f'{self._link.error}: nothing sent')
-            return
-        self._check_reachable(device)
-        if device.health.misconfigured:
-            raise CommandRefused(f'{device.name}: {device.health.misconfigured}: nothing sent')
-        reading = device.reading
-        if command.may_start and reading is not None and reading.tripped:
-            trip = reading.trip_name or 'no trip name'
-            raise CommandRefused(f'{device.name} is tripped ({trip}): reset it first; '
-                                 'nothing sent')
-        device.profile.check_command(command, reading)
-
-    def _check_reachable(self, device: BusDevice) -> None:
-        if self._link.error:
-            raise CommandRefused(f'{self._link.error}: nothing sent')
-        if device.health.online is not True:
-            raise CommandRefused(f'{device.name} is offline ({device.health.status_text}): '
-                                 'nothing sent')
 
     def _enqueue(self, job: Job) -> None:
         self._jobs.push(job)
@@ -411,7 +376,7 @@ class BusMaster:
         self.internal_errors += 1
         self.last_internal_error = f'{type(error).__name__}: {error}'
         try:
-            self._abandon_poll()
+            self._poller.abandon()
             self._link_lost(f'bus offline: internal error ({self.last_internal_error}); '
                             'reopening the link')
         except Exception:  # noqa: B902 - the bus thread must never die
@@ -448,10 +413,10 @@ class BusMaster:
         with self._lock:
             job = self._jobs.pop()
         if job is not None:
-            self._run_job(job)
+            self._work.run(job)
             return 0.0
-        if self._poll is not None:
-            self._run_poll_step(self._poll)
+        if self._poller.current is not None:
+            self._poller.step(self._poller.current)
             return 0.0
         device = self._next_due_device()
         if device is None:
@@ -459,7 +424,7 @@ class BusMaster:
         wait_s = device.health.next_due_s - now
         if wait_s > 0:
             return wait_s
-        self._begin_poll(device, now)
+        self._poller.begin(device, now)
         return 0.0
 
     def _next_due_device(self) -> Optional[BusDevice]:
@@ -473,7 +438,7 @@ class BusMaster:
             expired = self._jobs.remove(keep=lambda job: now <= job.deadline_s or
                                         isinstance(job, StopAllJob))
         for job in expired:
-            self._fail(job, CommandExpired(
+            fail(job, CommandExpired(
                 f'{job.describe()} not sent: the bus did not get to it within its deadline '
                 f'({job.deadline_s - now:+.2f} s); it is dropped and never sent'))
 
@@ -494,11 +459,6 @@ class BusMaster:
             device.stats.last_error = text
         self._emit(BusEvent(device.name, 'notice', message=text))
 
-    @staticmethod
-    def _fail(job: Job, error: Exception) -> None:
-        if job.future.set_running_or_notify_cancel():
-            job.future.set_exception(error)
-
     # -- link ---------------------------------------------------------------------------
     def _open_link(self) -> bool:
         if not self._link.try_open():
@@ -511,14 +471,14 @@ class BusMaster:
         return True
 
     def _link_lost(self, reason: str) -> None:
-        self._abandon_poll()
+        self._poller.abandon()
         self._link.lost(reason)
         self._mark_all_offline(reason)
 
     def _mark_all_offline(self, reason: str) -> None:
         with self._lock:
             for device in self._devices.values():
-                self._mark_offline(device, reason)
+                self._poller.mark_offline(device, reason)
 
     def _drain_jobs_while_down(self) -> None:
         """While the link is down nothing can be sent: answer every waiting job now."""
@@ -528,305 +488,20 @@ class BusMaster:
             if job is None:
                 return
             if isinstance(job, StopAllJob):
-                self._run_stop_all(job)
+                self._work.run_stop_all(job)
             else:
-                self._fail(job, CommandRefused(f'{self._link.error}: nothing sent'))
+                fail(job, CommandRefused(f'{self._link.error}: nothing sent'))
 
     # -- polls --------------------------------------------------------------------------
-    def _begin_poll(self, device: BusDevice, now: float) -> None:
-        with self._lock:
-            device.health.schedule_next(device.poll_period_s, now)
-        self._poll = PollRun(device, device.profile.poll(device.owner), now)
-        self._run_poll_step(self._poll)
-
-    def _abandon_poll(self) -> None:
-        poll, self._poll = self._poll, None
-        if poll is not None:
-            poll.abandon()
-
-    def _run_poll_step(self, poll: PollRun) -> None:
-        device = poll.device
-        try:
-            step = poll.next_step()
-        except ModelMismatch as error:
-            self._poll = None
-            self._misconfigured(device, error)
-            return
-        except DECODE_ERRORS as error:
-            self._poll = None
-            self._poll_failed(device, ProtocolError(f'cannot decode reply: {error}'))
-            return
-        if step is None:
-            self._poll = None
-            self._poll_succeeded(device, poll.reading, poll.started_s)
-            return
-        try:
-            result = self._runner.transact(device, step.request)
-        except MonitorOnly as error:
-            if step.optional:
-                poll.deliver(error)
-            else:
-                self._abandon_poll()
-                self._poll_failed(device, error)
-            return
-        except LinkDown as error:
-            self._link_lost(str(error))
-            return
-        except TransportError as error:
-            self._step_failed(poll, step, error)
-            return
-        with self._lock:
-            device.health.consecutive_failures = 0
-        poll.deliver(result)
-
-    def _step_failed(self, poll: PollRun, step, error: TransportError) -> None:
-        device = poll.device
-        health = device.health
-        with self._lock:
-            if not isinstance(error, DeviceException):
-                health.consecutive_failures += 1
-            retries = self.timing.retries if health.online is not False else 0
-            retry = step.retry and retryable(error) and poll.attempt < retries and \
-                health.consecutive_failures < self.timing.offline_after
-            if retry:
-                poll.attempt += 1
-                device.stats.retries += 1
-                return
-        if optional_failure(step, error):
-            poll.deliver(error)
-            return
-        self._abandon_poll()
-        self._poll_failed(device, error)
-
-    def _poll_failed(self, device: BusDevice, error: Exception) -> None:
-        """
-        Note why a poll gave no reading; go offline or unknown after enough in a row.
-
-        A device that keeps refusing (exception replies) is reachable but unreadable: after
-        ``offline_after`` refused polls in a row its state is unknown and its values are
-        dropped. One that stops answering goes offline after ``offline_after`` failed
-        transactions in a row. Either way a single failure is counted, not reported as a
-        change of state.
-        """
-        with self._lock:
-            health = device.health
-            limit = self.timing.offline_after
-            health.poll_failure = str(error)
-            if isinstance(error, (DeviceException, MonitorOnly)):
-                text = device.profile.explain_exception(error.code) \
-                    if isinstance(error, DeviceException) else str(error)
-                health.poll_failure = text
-                health.refused_polls += 1
-                health.status_text = f'poll refused ({health.refused_polls} in a row): {text}'
-                if health.refused_polls == limit:
-                    device.reading = None
-                    self._emit(BusEvent(device.name, 'error', message=health.status_text))
-                return
-            if isinstance(error, ProtocolError):
-                device.stats.record_error(TransportError(str(error)))
-                health.status_text = str(error)
-                return
-            if health.online is False:
-                health.backoff(self.timing.backoff_initial_s, self.timing.backoff_max_s,
-                               self.clock())
-                health.status_text = f'no reply since going offline: {error}'
-                return
-            health.status_text = f'poll failed ({health.consecutive_failures} failed '\
-                f'transactions in a row): {error}'
-            if health.consecutive_failures >= limit or health.online is None:
-                self._mark_offline(device, str(error))
-
-    def _mark_offline(self, device: BusDevice, reason: str) -> None:
-        was_offline = device.health.online is False
-        device.health.online = False
-        device.reading = None
-        device.profile.on_offline()
-        device.owner.on_offline(self.clock())
-        device.health.status_text = reason
-        device.health.backoff(self.timing.backoff_initial_s, self.timing.backoff_max_s,
-                              self.clock(), first=True)
-        if self._poll is not None and self._poll.device is device:
-            self._abandon_poll()
-        if not was_offline:
-            self._emit(BusEvent(device.name, 'offline', message=reason))
-
-    def _misconfigured(self, device: BusDevice, error: ModelMismatch) -> None:
-        with self._lock:
-            health = device.health
-            first = health.misconfigured != str(error)
-            health.misconfigured = str(error)
-            health.online = True
-            health.status_text = str(error)
-            device.reading = None
-            if first:
-                self._emit(BusEvent(device.name, 'error', message=str(error)))
-
-    def _poll_succeeded(self, device: BusDevice, reading: DeviceReading,
-                        started_s: float) -> None:
-        notices = []
-        with self._lock:
-            health = device.health
-            came_online = health.online is not True or bool(health.misconfigured)
-            health.online = True
-            health.misconfigured = ''
-            health.backoff_s = 0.0
-            health.refused_polls = 0
-            health.poll_failure = ''
-            health.status_text = 'ok'
-            device.reading = reading
-            device.reading_time_s = started_s
-            device.stats.errors.pop('offline_reported', None)
-            if came_online:
-                notices.append(device.owner.on_online(self.clock()))
-            notices.append(device.owner.on_reading(reading, started_s))
-            if came_online:
-                self._emit(BusEvent(device.name, 'online', reading=reading, stamp_s=started_s))
-            self._emit(BusEvent(device.name, 'reading', reading=reading, stamp_s=started_s))
-            for notice in notices:
-                if notice:
-                    self._emit(BusEvent(device.name, 'notice', message=notice))
-            retry_setup = self.clock() >= device.setup_retry_at_s
-            if (came_online or retry_setup) and isinstance(device.profile, SetupWrites) and \
-                    device.owner.writes_allowed:
-                device.setup_retry_at_s = math.inf
-                writes = tuple(device.profile.setup_plan())
-                if writes:
-                    self._jobs.push(SetupJob(device, math.inf, Future(), writes))
+    def _setup_due(self, device: BusDevice) -> None:
+        """Queue the set-up writes of a device (not for a monitor-only one)."""
+        device.setup_retry_at_s = math.inf
+        if isinstance(device.profile, SetupWrites) and device.owner.writes_allowed:
+            writes = tuple(device.profile.setup_plan())
+            if writes:
+                self._jobs.push(SetupJob(device, math.inf, Future(), writes))
 
     # -- jobs ---------------------------------------------------------------------------
-    def _run_job(self, job: Job) -> None:
-        if isinstance(job, StopAllJob):
-            self._run_stop_all(job)
-        elif isinstance(job, CommandJob):
-            self._run_command_job(job)
-        elif isinstance(job, ParameterJob):
-            self._run_parameter_job(job)
-        elif isinstance(job, SetupJob):
-            self._run_setup_job(job)
-
-    def _run_command_job(self, job: CommandJob) -> None:
-        device = job.device
-        try:
-            with self._lock:  # the state may have changed since the command was queued
-                self._admit(device, job.command)
-        except CommandRefused as error:
-            self._fail(job, error)
-            return
-        if not job.future.set_running_or_notify_cancel():
-            return  # the caller gave up before it was sent: never sent
-        try:
-            job.future.set_result(self._execute_command(device, job.command))
-        except (CommandRefused, TransportError) as error:
-            job.future.set_exception(error)
-
-    def _execute_command(self, device: BusDevice, command: Command) -> str:
-        """Send ``command`` now; return the outcome in words or raise with it."""
-        owner = device.owner
-        with self._lock:
-            plan = device.profile.command_plan(command, owner)  # with what is in force now
-            motion_before = owner.motion
-            owner.sending(command)
-            if command.may_start:
-                deadman.feed(device, self.clock())
-        try:
-            for request in plan.writes:
-                self._runner.transact(device, request)
-        except (DeviceException, MonitorOnly) as error:
-            with self._lock:
-                owner.refused(command, motion_before)
-            text = error if isinstance(error, MonitorOnly) else \
-                f'rejected by {device.name}: {self._runner.explain(device, error)}'
-            raise CommandRefused(str(text)) from None
-        except TransportError as error:
-            with self._lock:
-                owner.unanswered(command, motion_before, self.clock())
-            if isinstance(error, LinkDown):
-                self._link_lost(str(error))
-            raise TransportError(
-                f'no acknowledgement from {device.name} for {command.value} ({error}); it may '
-                'or may not have been executed and is not repeated'
-                + ('; the motor counts as possibly running' if command.may_start else '')) \
-                from None
-        with self._lock:
-            owner.acknowledged(command)
-            if command.may_start:
-                deadman.feed(device, self.clock())
-            device.health.next_due_s = self.clock()  # read the new state at once
-        return f'{command.value} acknowledged by {device.name} (address {device.spec.unit})'
-
-    def _run_stop_all(self, job: StopAllJob) -> None:
-        outcomes = []
-        for device in list(self._devices.values()):
-            with self._lock:
-                holds_run = device.owner.holds_run
-                if holds_run and not device.spec.stop_on_shutdown:
-                    device.owner.release('left as it was (stop_on_shutdown is false): the '
-                                         'cyclic image is no longer written', self.clock())
-                    outcomes.append(f'{device.name}: left running (stop_on_shutdown is '
-                                    'false)')
-                    continue
-            if not holds_run:
-                continue
-            if self.clock() > job.deadline_s:
-                outcomes.append(f'{device.name}: NOT STOPPED: no time left ({job.reason})')
-                continue
-            if self._link.error:
-                outcomes.append(f'{device.name}: NOT STOPPED: {self._link.error}')
-                continue
-            try:
-                outcomes.append(self._execute_command(device, Command.STOP))
-            except (CommandRefused, TransportError) as error:
-                outcomes.append(f'{device.name}: stop on {job.reason} failed: {error}')
-        if job.future.set_running_or_notify_cancel():
-            job.future.set_result(outcomes)
-
-    def _run_parameter_job(self, job: ParameterJob) -> None:
-        if not job.future.set_running_or_notify_cancel():
-            return
-        device = job.device
-        results: list = []
-        try:
-            for request in job.plan.transactions:
-                results.append(self._runner.transact(device, request))
-        except DeviceException as error:
-            job.future.set_exception(CommandRefused(
-                f'rejected by {device.name}: {self._runner.explain(device, error)}'))
-            return
-        except (TransportError, MonitorOnly) as error:
-            if isinstance(error, LinkDown):
-                self._link_lost(str(error))
-            job.future.set_exception(error)
-            return
-        try:
-            job.future.set_result(job.plan.decode(results))
-        except DECODE_ERRORS as error:
-            job.future.set_exception(ProtocolError(f'{job.plan.label}: cannot decode the '
-                                                   f'reply: {error}'))
-
-    def _run_setup_job(self, job: SetupJob) -> None:
-        """Send the set-up writes (drives: their comms timeout) each time a device is back."""
-        device = job.device
-        for write in job.writes:
-            try:
-                self._runner.transact(device, write)
-            except LinkDown as error:
-                self._link_lost(str(error))
-                return
-            except (TransportError, MonitorOnly) as error:
-                text = self._runner.explain(device, error) \
-                    if isinstance(error, TransportError) else str(error)
-                lost = isinstance(error, TransportError) and \
-                    not isinstance(error, DeviceException)
-                with self._lock:
-                    device.setup_error = f'set-up write {write.describe()} failed: {text}' + \
-                        ('; it is sent again' if lost else '')
-                    if lost:  # a lost reply, not a refusal: try again after a pause
-                        device.setup_retry_at_s = self.clock() + SETUP_RETRY_S
-                self._emit(BusEvent(device.name, 'notice', message=device.setup_error))
-                return
-        with self._lock:
-            device.setup_error = ''
-
     def _emit(self, event: BusEvent) -> None:
         try:
             self.listener(event)

@@ -153,7 +153,8 @@ class MotorOwner(ControlView):
         """Record that every write of ``command`` was acknowledged."""
         self.in_flight = None
         if command.may_start:
-            self._steady = Command.START
+            if self.cyclic:
+                self._steady = Command.START
             self.motion = Motion.RUNNING
             self.note = 'start acknowledged'
         elif command.stops:

@@ -25,6 +25,7 @@ asks ``isinstance(profile, Capability)`` and never probes attributes:
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+import time
 from typing import (
     Any, Callable, Dict, FrozenSet, Generator, List, Mapping, Optional, Sequence, Tuple)
 
@@ -166,6 +167,29 @@ class FixedControl(ControlView):
     def reference_word(self) -> int:
         """Return the fixed reference word."""
         return self._reference_word
+
+
+class SlowReadouts:
+    """
+    When a device's slow readouts are due: at most one poll in ``period_s`` reads them.
+
+    The fast values (status, current, speed) are read every poll; the slow ones (an FC
+    drive's frequency, thermal load and status words in turn, an MCD's product registers, the
+    LVSG operating parameters) only when due. ``period_s`` 0 reads them every poll.
+    """
+
+    def __init__(self, period_s: float = 1.0, clock: Callable[[], float] = time.monotonic):
+        self.period_s = period_s
+        self.clock = clock
+        self._next_s = -float('inf')
+
+    def due(self) -> bool:
+        """Return whether this poll reads slow readouts (and count it as the one that does)."""
+        now = self.clock()
+        if now < self._next_s:
+            return False
+        self._next_s = now + self.period_s
+        return True
 
 
 class DeviceProfile(ABC):

@@ -17,8 +17,8 @@ from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequ
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, ParameterAccess,
-    ParameterOptions, ParameterPlan, PollCycle, PollStep, SetupWrites, SpeedReference,
-    TRIP_CODE_UNKNOWN)
+    ParameterOptions, ParameterPlan, PollCycle, PollStep, SetupWrites, SlowReadouts,
+    SpeedReference, TRIP_CODE_UNKNOWN)
 from drive_bridge.devices.parameters import (
     decode_value, encode_value, parameter_address, ParameterSpec, TEXT)
 from drive_bridge.errors import (
@@ -117,7 +117,8 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
 
     def __init__(self, data: DriveFamilyData, model: str = 'auto', current_scale: float = 1.0,
                  comms_timeout_s: float = 0.0, comms_timeout_function: int = -1,
-                 readout_overrides: Optional[Dict[str, int]] = None):
+                 readout_overrides: Optional[Dict[str, int]] = None,
+                 slow_readouts: Optional[SlowReadouts] = None):
         if model not in data.models:
             raise ConfigError(f'unknown {data.name} model {model!r}: allowed '
                               f'{", ".join(data.models)}')
@@ -137,6 +138,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         self._identified = data.identify_parameter is None
         self._values: Dict[str, object] = {}
         self._rotation = 0
+        self.slow_readouts = slow_readouts or SlowReadouts(0.0)
 
     # -- model and readouts -------------------------------------------------------------
     @property
@@ -180,9 +182,9 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         return tuple((key, number) for key, number in pairs if number is not None)
 
     def next_rotating_readout(self) -> Optional[str]:
-        """Return the slow readout whose turn it is this poll (they take turns)."""
+        """Return the slow readout whose turn it is, if this poll reads one (they take turns)."""
         rotating = [name for name in self.readouts if name not in ALWAYS_READ]
-        if not rotating:
+        if not rotating or not self.slow_readouts.due():
             return None
         name = rotating[self._rotation % len(rotating)]
         self._rotation += 1
@@ -343,6 +345,7 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
     def __init__(self, data: DriveFamilyData, model: str = 'auto', current_scale: float = 1.0,
                  comms_timeout_s: float = 0.0, comms_timeout_function: int = -1,
                  readout_overrides: Optional[Dict[str, int]] = None,
+                 slow_readouts: Optional[SlowReadouts] = None,
                  drive_link_timeout_s: float = 0.0):
         if drive_link_timeout_s > 0 and data.drive_link_timeout_register is None:
             raise ConfigError(f'drive_link_timeout applies to the VLT option card (register 3), '
@@ -353,7 +356,7 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
                 raise ConfigError(f'{label} = {seconds} s does not fit the option card '
                                   'register (10 ms units): allowed up to 655.35 s')
         super().__init__(data, model, current_scale, comms_timeout_s, comms_timeout_function,
-                         readout_overrides)
+                         readout_overrides, slow_readouts)
         self.drive_link_timeout_s = drive_link_timeout_s
 
     # -- polling ------------------------------------------------------------------------
@@ -509,10 +512,16 @@ def make_drive_profile(data: DriveFamilyData) -> Callable[[str, str, Mapping[str
     def make(model: str, protocol: str, options: Mapping[str, Any]) -> DeviceProfile:
         overrides = {'motor_current': options['current_parameter']} \
             if options.get('current_parameter') else {}
-        return DriveProfile(data, model, options.get('current_scale', 1.0),
-                            options.get('comms_timeout', 0.0),
-                            options.get('comms_timeout_function', -1), overrides,
-                            options.get('drive_link_timeout', 0.0))
+        common = (data, model, options.get('current_scale', 1.0),
+                  options.get('comms_timeout', 0.0), options.get('comms_timeout_function', -1),
+                  overrides, SlowReadouts(options.get('readout_period', 0.0)))
+        if protocol == 'fc_protocol':
+            from drive_bridge.devices.fc_protocol_drive import FcProtocolDriveProfile
+            if options.get('drive_link_timeout', 0.0) > 0:
+                raise ConfigError("drive_link_timeout is the Modbus option card's register 3: "
+                                  'on the FC protocol there is no card; leave it at 0')
+            return FcProtocolDriveProfile(*common)
+        return DriveProfile(*common, options.get('drive_link_timeout', 0.0))
     return make
 
 

@@ -142,7 +142,7 @@ COMMS_TIMEOUT_FUNCTION = Setting(
 ENTRY = Family(
     name=FAMILY, description='VLT Micro Drive FC 51, built-in Modbus RTU',
     models=MODELS, address_range=ADDRESS_RANGE,
-    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'),
+    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'fc_protocol'),
     settings=(COMMS_TIMEOUT, COMMS_TIMEOUT_FUNCTION, CURRENT_PARAMETER),
     make_profile=make_drive_profile(DATA), sim_models=('fc51',),
     make_simulator=make_drive_simulator, reference=True)

@@ -19,7 +19,7 @@ from typing import Any, Dict, FrozenSet, Mapping, Optional
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Family, PollCycle,
-    PollStep, TRIP_CODE_UNKNOWN)
+    PollStep, SlowReadouts, TRIP_CODE_UNKNOWN)
 from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
 from drive_bridge.protocol import lvsg
 from drive_bridge.protocol.commands import Command
@@ -50,7 +50,8 @@ class LvsgProfile(DeviceProfile, CyclicControl):
 
     def __init__(self, model: str = 'auto', current_scale: float = 1.0,
                  input_register: int = 0, output_register: int = 0,
-                 byte_order: str = 'big', module: str = 'extended'):
+                 byte_order: str = 'big', module: str = 'extended',
+                 slow_readouts: Optional[SlowReadouts] = None):
         if model not in MODELS:
             raise ConfigError(f'unknown lvsg model {model!r}: allowed {", ".join(MODELS)}')
         if module not in MODULES or byte_order not in BYTE_ORDERS:
@@ -70,6 +71,8 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         self.request = lvsg.PARAMETER_PRODUCT
         self.values: Dict[int, int] = {}
         self.hazard = ''
+        self.slow_readouts = slow_readouts or SlowReadouts(0.0)
+        self._slow_turn = 0
 
     @property
     def input_registers(self) -> int:
@@ -192,14 +195,32 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         self.image = replace(control, reset=False)
 
     def _take_answer(self, status: lvsg.Status) -> None:
+        """
+        Keep the answer to the request in force and choose the next request.
+
+        Current and temperature (parameters 3, 4) take turns every poll; product and state
+        (1, 2) come in when the slow readouts are due and until each was read once; after a
+        trip the state (with the trip code) is asked for next.
+        """
         if status.parameter == self.request and not status.invalid_parameter:
             self.values[self.request] = status.value
-            index = lvsg.PARAMETERS.index(self.request)
-            self.request = lvsg.PARAMETERS[(index + 1) % len(lvsg.PARAMETERS)]
+            self.request = self._next_request()
         state = self.values.get(lvsg.PARAMETER_STATE)
         trip_known = state is not None and state >> 8 != lvsg.NO_TRIP
         if status.fault and not trip_known:
             self.request = lvsg.PARAMETER_STATE  # a trip: ask for the trip code next
+
+    def _next_request(self) -> int:
+        slow = (lvsg.PARAMETER_PRODUCT, lvsg.PARAMETER_STATE)
+        unread = [number for number in slow if number not in self.values]
+        if unread:
+            return unread[0]
+        if self.request == lvsg.PARAMETER_CURRENT:
+            return lvsg.PARAMETER_TEMPERATURE
+        if self.request == lvsg.PARAMETER_TEMPERATURE and self.slow_readouts.due():
+            self._slow_turn = (self._slow_turn + 1) % len(slow)
+            return slow[self._slow_turn]
+        return lvsg.PARAMETER_CURRENT
 
     def _resolve_model(self) -> None:
         product = self.values.get(lvsg.PARAMETER_PRODUCT)
@@ -342,7 +363,8 @@ def make_profile(model: str, protocol: str, options: Mapping[str, Any]) -> LvsgP
     return LvsgProfile(model, options.get('current_scale', 1.0),
                        options['gateway_input_register'], options['gateway_output_register'],
                        options.get('gateway_byte_order', 'big'),
-                       options.get('lvsg_module', 'extended'))
+                       options.get('lvsg_module', 'extended'),
+                       SlowReadouts(options.get('readout_period', 0.0)))
 
 
 ENTRY = Family(

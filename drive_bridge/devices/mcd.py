@@ -11,7 +11,7 @@ from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tupl
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, DeviceProfile, DeviceReading, Family, ParameterAccess,
-    ParameterOptions, ParameterPlan, PollCycle, PollStep, TRIP_CODE_UNKNOWN)
+    ParameterOptions, ParameterPlan, PollCycle, PollStep, SlowReadouts, TRIP_CODE_UNKNOWN)
 from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
@@ -228,11 +228,14 @@ class McdProfile(DeviceProfile, ParameterAccess):
     family = FAMILY
     commands = frozenset(COMMAND_VALUES)
 
-    def __init__(self, model: str = 'auto', current_scale: float = 1.0):
+    def __init__(self, model: str = 'auto', current_scale: float = 1.0,
+                 slow_readouts: Optional[SlowReadouts] = None):
         if model not in MODELS:
             raise ConfigError(f'unknown MCD model {model!r}: allowed {", ".join(MODELS)}')
         super().__init__(model)
         self.current_scale = current_scale
+        self.slow_readouts = slow_readouts or SlowReadouts(0.0)
+        self._product_registers: Optional[List[int]] = None  # 40007-40008 as last read
 
     @property
     def features(self) -> ModelFeatures:
@@ -247,18 +250,28 @@ class McdProfile(DeviceProfile, ParameterAccess):
         return frozenset({'motor_current', 'motor_temperature'})
 
     def poll(self, control: ControlView) -> PollCycle:
-        """Read 40003-40008 in one transaction (never past 40008) and decode them."""
+        """
+        Read 40003-40006 (status, trip, current, temperature) in one transaction.
+
+        The product and protocol registers 40007-40008 come with them when the slow readouts
+        are due and until the model is known (never past 40008: section 8, error 05).
+        """
         first = REGISTER['starter_status']
-        registers = yield PollStep(ReadRegisters(first.address,
-                                                 LAST_STATUS_NUMBER - first.number + 1))
+        slow = self.slow_readouts.due() or self._product_registers is None
+        last = LAST_STATUS_NUMBER if slow else REGISTER['motor_temperature'].number
+        registers = yield PollStep(ReadRegisters(first.address, last - first.number + 1))
         return self.decode([registers])
 
     def decode(self, blocks: List[List[int]]) -> DeviceReading:
-        """Decode the registers of one poll (40003-40008) into a reading."""
+        """Decode the registers of one poll (40003-40008, or 40003-40006) into a reading."""
         registers = blocks[0]
-        if len(registers) != 6:
-            raise ProtocolError(f'expected 6 registers 40003-40008, got {len(registers)}')
-        status_word, trip_raw, current_raw, temperature_raw, product_word, protocol = registers
+        if len(registers) == 6:
+            self._product_registers = registers[4:]
+        elif len(registers) != 4 or self._product_registers is None:
+            raise ProtocolError(f'expected 6 registers 40003-40008 (or 4 once the model is '
+                                f'known), got {len(registers)}')
+        status_word, trip_raw, current_raw, temperature_raw = registers[:4]
+        product_word, protocol = self._product_registers
         self.resolved_model = resolve_model(self.configured_model, product_word)
         features = self.features
         trip_code = 0 if trip_raw == NO_TRIP else trip_raw
@@ -277,6 +290,10 @@ class McdProfile(DeviceProfile, ParameterAccess):
             'serial_protocol_version': str(protocol),
         })
         return reading
+
+    def on_offline(self) -> None:
+        """Forget the product registers: the device may come back as another one."""
+        self._product_registers = None
 
     def command_plan(self, command: Command, control: ControlView) -> CommandPlan:
         """Return the write that carries out ``command`` (register 40002)."""
@@ -357,10 +374,11 @@ def starter_reading(features: ModelFeatures, status_word: int, trip_code: int,
 def make_profile(model: str, protocol: str, options: Mapping[str, Any]) -> McdProfile:
     """Return the profile of an MCD starter on ``protocol`` (Modbus or AP ASCII)."""
     scale = options.get('current_scale', 1.0)
+    slow = SlowReadouts(options.get('readout_period', 0.0))
     if protocol == 'ap_ascii':
         from drive_bridge.devices.mcd_ascii import McdAsciiProfile
-        return McdAsciiProfile(model, scale)
-    return McdProfile(model, scale)
+        return McdAsciiProfile(model, scale, slow)
+    return McdProfile(model, scale, slow)
 
 
 def make_simulator(model: str, now_s: float, **settings: Any) -> Any:

@@ -16,7 +16,7 @@ from drive_bridge.errors import CommandRefused, ProtocolError
 from drive_bridge.protocol import ap_ascii
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest
-from drive_bridge.protocol.words import bit
+from drive_bridge.protocol.words import bit, bits
 
 # Section 10.2, C22 bit 7 (the Modbus register 40003 has no such bit).
 STATUS_BIT_COMMS_DEVICE_FAULT = 7
@@ -37,15 +37,24 @@ class McdAsciiProfile(mcd.McdProfile):
     commands = frozenset(ap_ascii.COMMANDS)
 
     def poll(self, control: ControlView) -> PollCycle:
-        """Ask for status, trip code, and current/temperature where the model has them."""
-        replies = {}
-        keys = ['status', 'trip_code']
+        """
+        Ask for status, and current and temperature where the model has them.
+
+        The trip code (C18) is asked for when the status shows a trip, and otherwise only
+        when the slow readouts are due (each request is an exchange of its own).
+        """
+        replies = {'status': (yield PollStep(AsciiRequest(*ap_ascii.REQUESTS['status'])))}
+        if not isinstance(replies['status'], int):
+            raise ProtocolError('no status in the reply')
+        tripped = mcd.STATE_CODES.get(bits(replies['status'], 0, 3)) == 'tripped'
+        keys = ['trip_code'] if tripped or self.slow_readouts.due() else []
         if self.features.has_current:
             keys.append('motor_current')
         if self.features.has_temperature:
             keys.append('motor_temperature')
         for key in keys:
             replies[key] = yield PollStep(AsciiRequest(*ap_ascii.REQUESTS[key]))
+        replies.setdefault('trip_code', mcd.NO_TRIP)  # not tripped: no trip code to ask
         return self.decode_replies(replies)
 
     def decode_replies(self, values: Dict[str, object]) -> DeviceReading:

@@ -89,7 +89,7 @@ DRIVE_LINK_TIMEOUT = Setting(
 ENTRY = Family(
     name=FAMILY, description='VLT 5000 / VLT 6000 HVAC with the Modbus RTU option card',
     models=MODELS, address_range=ADDRESS_RANGE,
-    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp'),
+    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'fc_protocol'),
     settings=(COMMS_TIMEOUT, DRIVE_LINK_TIMEOUT, CURRENT_PARAMETER),
     make_profile=make_drive_profile(DATA), sim_models=MODELS,
     make_simulator=make_drive_simulator, reference=True)

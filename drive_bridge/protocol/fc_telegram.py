@@ -56,8 +56,10 @@ from typing import Dict, Optional, Tuple
 
 from drive_bridge.errors import ProtocolError
 from drive_bridge.protocol import rtu
+from drive_bridge.protocol.requests import Request
 
 STX = 0x02
+CONTROL_DATA_VALID = 1 << 10  # control word bit 10: 0 = the drive ignores the control word
 LGE_PROCESS = 6  # ADR + PCD1 PCD2 + BCC
 LGE_PARAMETER = 14  # ADR + PKE IND PWEhigh PWElow PCD1 PCD2 + BCC
 LGE_TEXT_FIXED = 10  # ADR + PKE IND + PCD1 PCD2 + BCC; + n text characters
@@ -403,12 +405,14 @@ def _parse(candidate: bytes) -> FcTelegram:
 
 # -- the master's requests --------------------------------------------------------------
 @dataclass(frozen=True)
-class FcTelegramRequest:
+class FcTelegramRequest(Request):
     """
     One FC-protocol transaction as the bus asks for it: the telegram without its address.
 
     The transport adds the address (``execute(unit, request)``) in its address format,
-    unless ``address_format`` names one here.
+    unless ``address_format`` names one here. It ``writes`` when its control word is valid
+    (bit 10 set: the drive obeys it) or its parameter channel writes; a telegram with a
+    control word without bit 10 and a read changes nothing in the drive.
     """
 
     control_word: int = 0
@@ -435,6 +439,21 @@ class FcTelegramRequest:
     def pnu(self) -> Optional[int]:
         """Return the request's parameter number, None for process data only."""
         return None if self.pke is None else self.pke & PNU_MASK
+
+    @property
+    def writes(self) -> bool:
+        """Return whether the telegram may change the drive (valid control data, a write)."""
+        if self.control_word & CONTROL_DATA_VALID:
+            return True
+        return self.ak in WRITE_AKS or (self.ak == AK_TEXT and
+                                        self.ind & TEXT_MODE_MASK == TEXT_WRITE_INDEX)
+
+    def describe(self) -> str:
+        """Return the request in words."""
+        parts = [f'control word 0x{self.control_word:04X}', f'reference 0x{self.reference:04X}']
+        if self.pke is not None:
+            parts.append(f'AK {self.ak} ({REQUEST_NAMES.get(self.ak, "?")}) par. {self.pnu}')
+        return f'FC telegram ({", ".join(parts)})'
 
     @property
     def max_reply_lge(self) -> int:

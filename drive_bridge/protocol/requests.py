@@ -36,6 +36,10 @@ class ModbusRequest(Request):
         """Return the request frame for device ``unit`` (without CRC)."""
         raise NotImplementedError
 
+    def reply_length(self) -> int:
+        """Return the length of the normal (not exception) RTU reply, CRC included."""
+        return 8  # writes: unit, function, address and value or quantity, CRC
+
     def parse(self, request: RtuFrame, reply: RtuFrame) -> Optional[list]:
         """Return what the reply carries (None for writes); raise BadFrame if it does not fit."""
         if reply.data[:4] != request.data[:4]:  # 05/06 echo, 0F/10 address + quantity
@@ -61,6 +65,10 @@ class ReadRegisters(ModbusRequest):
     def frame(self, unit: int) -> RtuFrame:
         """Return the function 03 request."""
         return rtu.read_registers_request(unit, self.address, self.count)
+
+    def reply_length(self) -> int:
+        """Return the reply's length: unit, function, byte count, registers, CRC."""
+        return 5 + 2 * self.count
 
     def parse(self, request: RtuFrame, reply: RtuFrame) -> List[int]:
         """Return the registers read."""
@@ -90,6 +98,10 @@ class ReadCoils(ModbusRequest):
     def frame(self, unit: int) -> RtuFrame:
         """Return the function 01 request."""
         return rtu.read_coils_request(unit, self.address, self.count)
+
+    def reply_length(self) -> int:
+        """Return the reply's length: unit, function, byte count, coil bytes, CRC."""
+        return 5 + (self.count + 7) // 8
 
     def parse(self, request: RtuFrame, reply: RtuFrame) -> List[bool]:
         """Return the coils read."""

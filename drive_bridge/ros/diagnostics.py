@@ -14,17 +14,7 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from drive_bridge.bus.master import DeviceSnapshot
 from drive_bridge.bus.motor import Motion
 from drive_bridge.devices.contracts import DeviceReading
-
-
-def status_name(node_fqn: str, device: str) -> str:
-    """
-    Return the status name of a device.
-
-    ``drive_bridge: feeder`` in the root namespace, ``/line1/drive_bridge: feeder`` in a
-    namespace (as diagnostic_updater's ``use_fqn`` names it).
-    """
-    namespace, _, node = node_fqn.rpartition('/')
-    return f'{node}: {device}' if not namespace else f'{node_fqn}: {device}'
+from drive_bridge.ros.naming import status_name  # noqa: F401 - part of this module's API
 
 
 def diagnostic_status(snapshot: DeviceSnapshot, name: str, link: str,

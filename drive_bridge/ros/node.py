@@ -23,7 +23,7 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusEvent, BusMaster
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError
@@ -99,6 +99,7 @@ class DriveBridgeNode(LifecycleNode):
         self._entities: List[Tuple[Callable[[Any], bool], Any]] = []  # (destroy, entity)
         self._publishing = threading.Lock()
         self._pending: List[_PendingCall] = []
+        self._runtime_changes: Dict[str, str] = {}  # device -> allow_control changed, in words
         self._pending_lock = threading.Lock()
         # Service coroutines stay "executing" while they await the bus: they and the guard
         # that hands them the bus's answers must not share a mutually exclusive group.
@@ -321,8 +322,14 @@ class DriveBridgeNode(LifecycleNode):
         except (ConfigError, CommandRefused) as error:
             return SetParametersResult(successful=False, reason=str(error))
         for device in enabling:
+            stamp = time.strftime('%Y-%m-%dT%H:%M:%S%z')
+            self._runtime_changes[device] = f'control enabled at runtime at {stamp}'
             self.get_logger().warning(f'{device}: control ENABLED at runtime (allow_control '
                                       'set true): commands and writes are taken from now on')
+        for device, change in changes.items():
+            if change.get('allow_control') is False:
+                self._runtime_changes[device] = 'monitor only since a runtime change at ' + \
+                    time.strftime('%Y-%m-%dT%H:%M:%S%z')
         return SetParametersResult(successful=True)
 
     # -- interface ----------------------------------------------------------------------
@@ -484,6 +491,10 @@ class DriveBridgeNode(LifecycleNode):
         array.status = [diagnostic_status(bus.snapshot(name), status_name(fqn, name),
                                           self.config.link.describe(), commands)
                         for name in bus.device_names]
+        for status, name in zip(array.status, bus.device_names):
+            if name in self._runtime_changes:
+                status.values.append(KeyValue(key='allow_control_changed',
+                                              value=self._runtime_changes[name]))
         return array
 
 
@@ -547,7 +558,13 @@ def main(args: Optional[List[str]] = None) -> int:
     # main thread takes them with sigtimedwait, so no KeyboardInterrupt ever lands inside a
     # stop, and a second signal cannot cut the stops short.
     signal.pthread_sigmask(signal.SIG_BLOCK, EXIT_SIGNALS)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as error:  # noqa: B902 - rcl refuses its arguments: say why in one line
+        reason = str(error).split(', at ')[0]
+        print(f'[drive_bridge] configuration error: ROS could not take the arguments: '
+              f'{reason}', file=sys.stderr, flush=True)
+        return 2
     node: Optional[DriveBridgeNode] = None
     stop = threading.Event()
     spinner: Optional[threading.Thread] = None

@@ -34,6 +34,8 @@ from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
 from drive_bridge.sim.devices import make_device, SIM_MODELS
 from drive_bridge.sim.faults import parse_fault_plan
 from drive_bridge.sim.fc_device import FcSimDevice
+from drive_bridge.sim.fc_protocol_device import FcProtocolDevice
+from drive_bridge.sim.fc_protocol_server import FcProtocolSimServer
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
 from drive_bridge.sim.wire_pacer import LineTiming, MASTER, SLAVE, WirePacer
@@ -74,8 +76,11 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar='MODEL:IN:OUT[:basic]',
                         help='an MCD 200 (mcd201, mcd202) with the Profibus Module behind a '
                              'Modbus gateway at unit 1: input and output image registers')
-    parser.add_argument('--protocol', choices=('modbus', 'ap_ascii'), default='modbus',
-                        help='ap_ascii: MCD starters on an AP ASCII line (pty only)')
+    parser.add_argument('--protocol', choices=('modbus', 'ap_ascii', 'fc_protocol'),
+                        default='modbus',
+                        help='ap_ascii: MCD starters on an AP ASCII line (pty only); '
+                             'fc_protocol: drives (fc51, vlt5000, vlt6000) on the Danfoss FC '
+                             'protocol')
     parser.add_argument('--link', default='', help='symlink to create for the pty')
     parser.add_argument('--no-pty', action='store_true', help='do not open a pty')
     parser.add_argument('--tcp', type=int, default=None, metavar='PORT',
@@ -120,7 +125,7 @@ def parse_pace(text: str, protocol: str = 'modbus') -> LineTiming:
         parity = parts[1] if len(parts) > 1 else ('N' if ascii_line else 'E')
         stopbits = int(parts[2]) if len(parts) > 2 else (
             1 if ascii_line or parity != 'N' else 2)
-        return LineTiming(baudrate, parity, stopbits, gap_rule=not ascii_line)
+        return LineTiming(baudrate, parity, stopbits, gap_rule=protocol == 'modbus')
     except ValueError as error:
         raise SystemExit(f'drive_bridge_sim: --pace {text!r}: {error}; give '
                          'BAUD[:PARITY[:STOPBITS]], e.g. 19200:E:1') from None
@@ -158,6 +163,13 @@ def build_server(args: argparse.Namespace):
                 is not None:
             raise SystemExit('drive_bridge_sim: AP ASCII serves MCD models on a pty only')
         server = ApAsciiSimServer({unit: device.model for unit, device in devices.items()})
+    elif args.protocol == 'fc_protocol':
+        if any(SIM_MODELS[model] not in ('fc', 'vlt') for model, _ in args.device):
+            raise SystemExit('drive_bridge_sim: the FC protocol serves drives only (fc51, '
+                             'vlt5000, vlt6000)')
+        server = FcProtocolSimServer({unit: FcProtocolDevice(device.model)
+                                      for unit, device in devices.items()},
+                                     wire_baud=args.wire_baud, wire_parity=args.wire_parity)
     else:
         wire = WireTiming(args.wire_baud, args.wire_parity,
                           1 if args.wire_parity != 'N' else 2) if args.wire_baud else None

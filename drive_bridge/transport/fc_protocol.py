@@ -18,16 +18,14 @@ answer the request) ``BadFrame``, and an AK 7 reply :class:`FcParameterError`, a
 A broadcast (address 0) is sent without waiting: nobody answers it.
 """
 
-import os
 import time
 from typing import Callable, Optional
 
 from drive_bridge.errors import (
-    BadFrame, ConfigError, CrcError, DeviceException, LinkDown, NoResponse, TruncatedFrame,
-    WrongAddress)
+    BadFrame, ConfigError, CrcError, DeviceException, NoResponse, TruncatedFrame, WrongAddress)
 from drive_bridge.protocol import fc_telegram as fc
 from drive_bridge.protocol.fc_telegram import FcTelegram, FcTelegramRequest
-from drive_bridge.transport.link import LinkSettings, URL_PREFIXES
+from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 import serial
 
@@ -39,8 +37,7 @@ class FcParameterError(DeviceException):
     """An AK 7 reply: the drive could not perform the parameter command (code in PWElow)."""
 
     def __init__(self, code: int, reply: FcTelegram):
-        super().__init__(code, f'parameter {reply.pnu}: {fc.explain_error(code)}')
-        self.reply = reply
+        super().__init__(code, f'parameter {reply.pnu}: {fc.explain_error(code)}', reply)
 
 
 class FcProtocolTransport(SerialPortTransport):
@@ -54,17 +51,6 @@ class FcProtocolTransport(SerialPortTransport):
                               f'{", ".join(fc.ADDRESS_FORMATS)}')
         super().__init__(settings, open_port)
         self.address_format = address_format
-
-    def framing(self) -> tuple:
-        """Return (parity, stop bits): the FC protocol's default is even parity, 1 stop bit."""
-        return self.settings.parity, self.settings.stopbits or fc.DEFAULT_STOPBITS
-
-    def connect(self) -> None:
-        """Open the port; a device path that does not exist is LinkDown 'not found'."""
-        port = self.settings.port
-        if not port.startswith(URL_PREFIXES) and not os.path.exists(port):
-            raise LinkDown(f'bus offline: {port} not found')
-        super().connect()
 
     def execute(self, unit: int, request: FcTelegramRequest) -> Optional[FcTelegram]:
         """Send ``request`` to address ``unit``; return the reply (None for a broadcast)."""

@@ -183,7 +183,10 @@ class ModbusTransport(Transport):
         code = getattr(response, 'exception_code', None)
         if code is None:
             raise self._classify_io_error(str(response))
-        if code in _GATEWAY_EXCEPTIONS:
+        if code in _GATEWAY_EXCEPTIONS and self.settings.protocol == 'modbus_tcp':
+            # A Modbus TCP gateway's own answer: its serial device did not answer. On a
+            # serial line (or through a transparent gateway) the device itself answers, and
+            # codes 10 and 11 are its own (the MCD module's 10: local communication error).
             raise NoResponse(f'no reply: {_GATEWAY_EXCEPTIONS[code]} '
                              f'(Modbus exception {code:02X}h)')
         raise DeviceException(code)

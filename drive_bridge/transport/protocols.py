@@ -10,7 +10,7 @@ transport module here, and one entry in :data:`PROTOCOLS`.
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Mapping, Optional, Tuple
 
-from drive_bridge.protocol import ap_ascii, rtu
+from drive_bridge.protocol import ap_ascii, fc_telegram, rtu
 from drive_bridge.protocol.requests import AP_ASCII_REQUESTS, MODBUS_REQUESTS
 from drive_bridge.settings import Setting
 
@@ -39,6 +39,8 @@ class ProtocolSpec:
     default_stopbits: Callable[[str], int] = rtu.default_stopbits
     frame_gap_s: Callable[[int, str, int], float] = rtu.frame_gap_s
     min_timeout_s: float = 0.02
+    # Device addresses the protocol carries, from its options (None: the family's range).
+    address_range: Optional[Callable[[Mapping[str, Any]], Tuple[int, int]]] = None
     settings: Tuple[Setting, ...] = ()
 
     @property
@@ -58,6 +60,11 @@ def _modbus_rtu(link, options: Mapping[str, Any]):
 def _pymodbus(link, options: Mapping[str, Any]):
     from drive_bridge.transport.modbus import ModbusTransport
     return ModbusTransport(link)
+
+
+def _fc_protocol(link, options: Mapping[str, Any]):
+    from drive_bridge.transport.fc_protocol import FcProtocolTransport
+    return FcProtocolTransport(link, options.get('address_format', fc_telegram.ADDRESS_FORMAT_126))
 
 
 def _ap_ascii(link, options: Mapping[str, Any]):
@@ -83,6 +90,18 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
             Setting('ap_address_lrc_eot', bool, True,
                     'AP ASCII: the address fragment LRC includes EOT (the manual leaves it '
                     'open)'))),
+    ProtocolSpec(
+        'fc_protocol', 'the Danfoss FC protocol on a serial port (VLT 5000/6000 par. 500, '
+        'FC 51 par. 8-30; 8E1 by default)', 'serial', (fc_telegram.FcTelegramRequest,),
+        _fc_protocol, default_stopbits=lambda parity: fc_telegram.DEFAULT_STOPBITS,
+        frame_gap_s=lambda baudrate, parity, stopbits: fc_telegram.GAP_CHARACTERS *
+        rtu.character_time_s(baudrate, parity, stopbits),
+        address_range=lambda options: (1, 31) if options.get('address_format') ==
+        fc_telegram.ADDRESS_FORMAT_31 else (1, 126),
+        settings=(Setting('address_format', str, fc_telegram.ADDRESS_FORMAT_126,
+                          'FC protocol: the address byte format the drives expect (1-126: '
+                          'addresses 1-126, the FC series; 1-31: addresses 1-31)',
+                          choices=fc_telegram.ADDRESS_FORMATS),)),
     ProtocolSpec('modbus_tcp', 'Modbus TCP gateway', 'tcp', MODBUS_REQUESTS, _pymodbus,
                  frame_gap_s=lambda baudrate, parity, stopbits: 0.0),
     ProtocolSpec('rtu_over_tcp', 'transparent serial-to-Ethernet gateway (Modbus RTU frames)',

@@ -8,6 +8,7 @@ naming the holder instead of a line where two masters talk over each other.
 
 import errno
 import os
+import select
 import time
 from typing import Callable
 
@@ -25,6 +26,7 @@ except ImportError:  # not POSIX
     class TermiosError(Exception):
         """Placeholder where termios does not exist."""
 PORT_ERRORS = (serial.SerialException, OSError, TermiosError)
+EARLY_WAKE_S = 0.002  # how much before a reply's end a wait for it ends
 
 
 def exclusive_open(port: str) -> bool:
@@ -68,7 +70,8 @@ class SerialPortTransport(Transport):
             self._port = self._open_port(
                 settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
                 parity=PARITIES[parity], stopbits=STOPBITS[stopbits],
-                timeout=settings.timeout_s, **exclusive)
+                timeout=0,  # reads return what is there; the waiting is done by select
+                **exclusive)
         except (*PORT_ERRORS, ValueError) as error:
             if exclusive and lock_refused(error):
                 raise LinkDown(f'bus offline: {in_use_text(settings.port)}') from error
@@ -100,17 +103,41 @@ class SerialPortTransport(Transport):
         data = b''
         while len(data) < count:
             remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                break
             chunk = self._read_some(count - len(data), remaining)
-            if not chunk:
+            if not chunk and remaining <= 0:
                 break
             data += chunk
         return data
 
     def _read_some(self, count: int, timeout_s: float) -> bytes:
-        """Read up to ``count`` bytes, waiting at most ``timeout_s`` for them."""
+        """
+        Read up to ``count`` bytes, waiting at most ``timeout_s`` for the first of them.
+
+        The port is open with timeout 0 (a read returns what is there), so no call here
+        changes the port's timeout (pyserial reconfigures the port on every change) and one
+        select is the only wake-up while nothing arrives.
+        """
         port = self._port
-        if port.timeout != timeout_s:
-            port.timeout = timeout_s
-        return port.read(count)
+        data = port.read(count)
+        if data or timeout_s <= 0:
+            return data
+        ready, _, _ = select.select([port], [], [], timeout_s)
+        return port.read(count) if ready else b''
+
+    def _await_bytes(self, count: int, char_s: float, deadline: float) -> None:
+        """
+        Sleep until ``count`` more bytes can have crossed the wire, unless they are there.
+
+        A reply cannot arrive faster than its wire time: one sleep instead of a wake-up per
+        byte or per USB batch. On a link that does not pace bytes (a pty, TCP) they are
+        already there and nothing waits.
+        """
+        waiting = self._port.in_waiting
+        if waiting >= count:
+            return
+        # Wake a little early: bytes reach us in batches (USB adapters, the pacer), and the
+        # read that follows waits for the last batch itself.
+        pause_s = min((count - waiting) * char_s - max(2 * char_s, EARLY_WAKE_S),
+                      deadline - time.monotonic())
+        if pause_s > 0.0005:
+            time.sleep(pause_s)

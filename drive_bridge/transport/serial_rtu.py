@@ -33,27 +33,37 @@ class RtuSerialTransport(SerialPortTransport):
             raise TypeError(f'unsupported request {request!r}')
         frame = request.frame(unit)
         try:
-            reply = self._exchange(frame)
+            reply = self._exchange(request, frame)
         except PORT_ERRORS as error:
             raise self._port_failed(error) from error
         if reply.function & 0x80:
             raise DeviceException(reply.data[0])
         return request.parse(frame, reply)
 
-    def _exchange(self, request: RtuFrame) -> RtuFrame:
+    def _exchange(self, request: ModbusRequest, frame: RtuFrame) -> RtuFrame:
         port = self._port
         port.reset_input_buffer()  # a late reply to an earlier request must not count
-        encoded = request.encode()
+        encoded = frame.encode()
         deadline = time.monotonic() + self.settings.timeout_s
         port.write(encoded)
         if self.settings.local_echo:
             echo = self._read(len(encoded), deadline)
             if echo != encoded:
                 raise BadFrame('the adapter did not echo the request (local_echo is set)')
-        return self._receive(request.unit, request.function, deadline)
+        return self._receive(frame.unit, frame.function, request.reply_length(), deadline)
 
-    def _receive(self, unit: int, function: int, deadline: float) -> RtuFrame:
-        buffer = b''
+    def _receive(self, unit: int, function: int, expected: int, deadline: float) -> RtuFrame:
+        """
+        Read the reply by its length: wait for its first byte, then for its wire time.
+
+        Two wake-ups, whatever the baud rate or the adapter's batching: the first byte, and
+        the end of the ``expected`` bytes (a shorter exception reply is read when it is
+        there). Then the decoder says what is missing, if anything.
+        """
+        buffer = self._read_some(1, deadline - time.monotonic())
+        if not buffer:
+            raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
+        self._await_bytes(expected - 1, self._char_s, deadline)
         needed = rtu.MIN_RESPONSE_BYTES
         while True:
             buffer += self._read(needed - len(buffer), deadline)
@@ -66,11 +76,15 @@ class RtuSerialTransport(SerialPortTransport):
                 raise error_type(f'invalid reply ({result.error}), {len(buffer)} bytes '
                                  'received')
             if len(buffer) < needed:  # the deadline passed
-                if not buffer:
-                    raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
                 raise TruncatedFrame(f'truncated reply: {len(buffer)} of {needed} bytes '
                                      f'within {self.settings.timeout_s:g} s')
             needed = result.needed
+            self._await_bytes(needed - len(buffer), self._char_s, deadline)
+
+    @property
+    def _char_s(self) -> float:
+        return rtu.character_time_s(self.settings.baudrate, self.settings.effective_parity,
+                                    self.settings.effective_stopbits)
 
     def _drain(self, deadline: float) -> None:
         """

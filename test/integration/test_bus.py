@@ -92,3 +92,32 @@ def test_model_mismatch_refuses_commands(sim_bus):
         assert list(sim_bus.devices[21].model.commands_received) == []
     finally:
         master.shutdown(stop_motors=False)
+
+
+def test_refused_polls_show_as_such_and_never_as_current_values(bus, sim_bus):
+    assert wait_until(lambda: bus.snapshot('main').reading is not None, 3.0)
+    model = sim_bus.devices[20].model
+    with sim_bus.lock:
+        model.local_comms_error = True  # the module answers every read with error 10
+    assert wait_until(lambda: bus.snapshot('main').poll_failure != '', 3.0)
+    snapshot = bus.snapshot('main')
+    assert 'no communication between the Modbus Module and the starter' in \
+        snapshot.poll_failure
+    events = len(bus.events)
+    assert wait_until(lambda: bus.snapshot('main').reading is None, 3.0)  # after offline_after
+    unknown = [e for e in bus.events[events:] if e.device == 'main' and e.kind == 'error']
+    assert len(unknown) == 1 and 'poll refused (3 in a row)' in unknown[0].message
+    with sim_bus.lock:
+        model.local_comms_error = False
+    assert wait_until(lambda: bus.snapshot('main').reading is not None, 3.0)
+    assert bus.snapshot('main').poll_failure == ''
+
+
+def test_a_single_busy_refusal_is_counted_not_a_change_of_state(bus, sim_bus):
+    assert wait_until(lambda: bus.snapshot('aux').reading is not None, 3.0)
+    events = len(bus.events)
+    sim_bus.faults.inject(21, 'exception')  # one exception 06 (busy)
+    assert wait_until(lambda: bus.snapshot('aux').stats['errors_exception'] == '1', 3.0)
+    assert wait_until(lambda: bus.snapshot('aux').poll_failure == '', 3.0)  # the next poll
+    assert not [e for e in bus.events[events:] if e.device == 'aux' and
+                e.kind in ('error', 'offline')]

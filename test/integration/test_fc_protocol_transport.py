@@ -10,6 +10,7 @@ from drive_bridge.protocol.fc_control import RAMP_STOP_WORD, START_WORD
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from drive_bridge.transport.fc_protocol import FcParameterError, FcProtocolTransport
 from drive_bridge.transport.link import LinkSettings
+from fakes import always_readable_fd
 from hypothesis import given, HealthCheck, settings, strategies as st
 import pytest
 
@@ -169,6 +170,13 @@ class FakePort:
 
     def reset_input_buffer(self) -> None:
         pass
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self.incoming)
+
+    def fileno(self) -> int:
+        return always_readable_fd()
 
     def close(self) -> None:
         pass

@@ -128,16 +128,50 @@ def test_allow_control_set_at_runtime(node, sim):
     ({'family': 'nope'}, {}, "'main.family' = 'nope' is invalid: allowed mcd"),
     ({}, {'parity': False}, 'write parity: "N" with quotes'),
     ({'poll_rat': 3.0}, {}, "unknown parameter 'main.poll_rat'"),
+    ({'poll_rate': 1e9}, {}, "'main.poll_rate' = 1000000000.0 is out of range: allowed [0.1, "),
+    ({'poll_rate': 0.0}, {}, "'main.poll_rate' = 0.0 is out of range: allowed [0.1, 100]"),
+    ({'poll_rate': float('nan')}, {}, "'main.poll_rate' = nan must be a finite number"),
+    ({'address': 300}, {}, "'main.address' = 300 is out of range: allowed [1, 247]"),
+    ({}, {'timeout': 0.001}, "'timeout' = 0.001 is out of range: allowed [0.02, 10]"),
+    ({}, {'retries': 11}, "'retries' = 11 is out of range: allowed [0, 10]"),
+    ({'comms_timeout': 1.0}, {}, "'main.comms_timeout' applies to families fc, vlt only"),
 ])
 def test_config_errors_stop_the_node_with_one_line(tmp_path, device, bus, expected):
     params = write_params(tmp_path / 'bad.yaml', {'port': '/dev/null', **bus},
                           {'main': {'family': 'mcd', 'address': 20, **device}})
-    process = start_node(params)
+    assert_one_line_config_error(start_node(params), expected)
+
+
+@pytest.mark.parametrize('name', ['feeder\n', 'x' * 300, 'my-drive', 'my drive', '1drive'])
+def test_an_invalid_device_name_is_named_as_such(tmp_path, name):
+    params = write_params(tmp_path / 'bad.yaml', {'port': '/dev/null'},
+                          {name: {'family': 'mcd', 'address': 20}})
+    assert_one_line_config_error(start_node(params), f'device name {name!r} is invalid')
+
+
+def test_a_file_rcl_cannot_parse_gets_one_line(tmp_path):
+    params = write_params(tmp_path / 'bad.yaml', {'port': '/dev/null'},
+                          {'': {'family': 'mcd', 'address': 20}})
+    assert_one_line_config_error(start_node(params), 'ROS could not take the arguments: ')
+
+
+def test_duplicate_keys_are_refused_with_their_lines(tmp_path):
+    path = tmp_path / 'twice.yaml'
+    path.write_text('/**/drive_bridge:\n  ros__parameters:\n    devices: ["main"]\n'
+                    '    main:\n      family: mcd\n      address: 20\n'
+                    '      allow_control: false\n      allow_control: true\n')
+    assert_one_line_config_error(start_node(str(path)),
+                                 "key 'allow_control' is given twice (lines 7 and 8)")
+
+
+def assert_one_line_config_error(process, expected: str) -> None:
+    """Check that the node exits 2 with one line, the configuration error, no traceback."""
     code = process.wait(timeout=20)
     stderr = node_output(process)
-    assert code == 2
+    assert code == 2, stderr
     lines = [line for line in stderr.splitlines() if 'configuration error' in line]
     assert len(lines) == 1 and expected in lines[0], stderr
+    assert 'Traceback' not in stderr, stderr
 
 
 def test_sigterm_stops_the_motor_this_node_started(tmp_path):
@@ -161,3 +195,45 @@ def test_sigterm_stops_the_motor_this_node_started(tmp_path):
         assert 'stop acknowledged by solo' in stderr
     finally:
         server.stop()
+
+
+def test_the_nested_parameter_file_form_of_the_ros2_docs(tmp_path):
+    server = make_mcd_server({20: 'mcd500'})
+    server.open_pty()
+    server.start()
+    path = tmp_path / 'nested.yaml'
+    path.write_text(f'line1:\n  drive_bridge:\n    ros__parameters:\n'
+                    f'      port: "{server.pty_path}"\n      parity: "N"\n'
+                    f'      devices: ["main"]\n      main:\n        family: mcd\n'
+                    f'        address: 20\n')
+    process = start_node(str(path), namespace='/line1')
+    client = RosClient(['main'], namespace='/line1')
+    try:
+        assert client.wait_state('main', 'ready', 15.0), node_output(process)
+    finally:
+        client.close()
+        stop_node(process)
+        server.stop()
+
+
+def test_enabling_control_at_runtime_is_logged_shown_and_can_be_forbidden(tmp_path):
+    server = make_mcd_server({20: 'mcd500', 21: 'mcd500'})
+    with serving(server):
+        devices = {'main': {'family': 'mcd', 'address': 20, 'allow_control': False},
+                   'aux': {'family': 'mcd', 'address': 21, 'allow_control': False}}
+        with running_node(tmp_path / 'p.yaml', {'port': server.pty_path, 'parity': 'N',
+                                                'diagnostics_period': 0.2}, devices,
+                          ready=['main']) as client:
+            assert client.set_parameter('main.allow_control', True).successful
+            assert client.spin_until(
+                lambda: client.diagnostics('main') is not None and 'allow_control_changed' in
+                {kv.key for kv in client.diagnostics('main').values})
+            assert client.spin_until(
+                lambda: 'control ENABLED at runtime' in node_output(client.process))
+        forbid = {'port': server.pty_path, 'parity': 'N', 'allow_runtime_control_enable': False}
+        with running_node(tmp_path / 'q.yaml', forbid, devices, ready=['aux']) as client:
+            result = client.set_parameter('aux.allow_control', True)
+            assert not result.successful
+            assert 'allow_runtime_control_enable is false' in result.reason
+            assert not client.call('aux', 'start').success
+            assert list(server.devices[21].model.commands_received) == []

@@ -6,6 +6,7 @@ import os
 
 from drive_bridge import config
 from drive_bridge.errors import ConfigError
+from drive_bridge.ros.naming import status_name
 import pytest
 import yaml
 
@@ -133,5 +134,8 @@ def test_aggregator_config_groups_every_drive_bridge_status():
         parameters = yaml.safe_load(stream)['/**/analyzers']['ros__parameters']
     group = parameters['drives']
     assert group['type'] == 'diagnostic_aggregator/GenericAnalyzer'
-    # The node names each status 'drive_bridge: <device>' (see ros/node.py).
-    assert group['startswith'] == ['drive_bridge: ']
+    # Status names: 'drive_bridge: <device>', or '/<ns>/drive_bridge: <device>' (ros/diagnostics).
+    assert group['contains'] == ['drive_bridge: ']
+    for name in (status_name('/drive_bridge', 'feeder'),
+                 status_name('/line1/drive_bridge', 'feeder')):
+        assert any(part in name for part in group['contains'])

@@ -24,7 +24,7 @@ from drive_bridge.sim.mcd_model import McdModel, McdSimConfig
 from drive_bridge.transport.ap_ascii import ApAsciiTransport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
-from fakes import drive_cycle
+from fakes import always_readable_fd, drive_cycle
 from hypothesis import given, HealthCheck, settings, strategies as st
 
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
@@ -115,6 +115,13 @@ class RandomPort:
     def read(self, count):
         chunk, self.reply = self.reply[:count], self.reply[count:]
         return chunk
+
+    @property
+    def in_waiting(self):
+        return len(self.reply)
+
+    def fileno(self):
+        return always_readable_fd()
 
     def close(self):
         pass

@@ -29,13 +29,22 @@ def _module(name: str, **attributes) -> types.ModuleType:
     return module
 
 
+class Configuration(Recorded):
+    """A stand-in LaunchConfiguration whose value comes from the fake context."""
+
+    def perform(self, context):
+        return context[self.args[0]]
+
+
 @pytest.fixture
-def launch_description(monkeypatch):
+def load_launch_file(monkeypatch):
     stand_ins = {
         'launch': _module('launch', LaunchDescription=Recorded),
-        'launch.actions': _module('launch.actions', DeclareLaunchArgument=Recorded),
+        'launch.actions': _module('launch.actions', DeclareLaunchArgument=Recorded,
+                                  OpaqueFunction=Recorded),
         'launch.conditions': _module('launch.conditions', IfCondition=Recorded),
-        'launch.substitutions': _module('launch.substitutions', LaunchConfiguration=Recorded),
+        'launch.substitutions': _module('launch.substitutions',
+                                        LaunchConfiguration=Configuration),
         'launch_ros': _module('launch_ros'),
         'launch_ros.actions': _module('launch_ros.actions', LifecycleNode=Recorded,
                                       Node=Recorded),
@@ -45,11 +54,35 @@ def launch_description(monkeypatch):
     }
     for name, module in stand_ins.items():
         monkeypatch.setitem(sys.modules, name, module)
-    path = os.path.join(ROOT, 'launch', 'drive_bridge.launch.py')
-    spec = importlib.util.spec_from_file_location('drive_bridge_launch', path)
-    launch_file = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(launch_file)
-    return launch_file.generate_launch_description()
+
+    def load(name: str):
+        path = os.path.join(ROOT, 'launch', name)
+        spec = importlib.util.spec_from_file_location(name.replace('.', '_'), path)
+        launch_file = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(launch_file)
+        return launch_file
+    return load
+
+
+@pytest.fixture
+def launch_description(load_launch_file):
+    return load_launch_file('drive_bridge.launch.py').generate_launch_description()
+
+
+def test_several_buses_one_node_each_and_one_aggregator(load_launch_file):
+    launch_file = load_launch_file('buses.launch.py')
+    actions = launch_file.generate_launch_description().args[0]
+    opaque = next(action for action in actions if 'function' in action.kwargs)
+    nodes = opaque.kwargs['function']({'buses': 'line1=/a.yaml; /line2=/b.yaml'})
+    assert [(node.kwargs['namespace'], node.kwargs['parameters']) for node in nodes] == \
+        [('line1', ['/a.yaml']), ('line2', ['/b.yaml'])]
+    assert all(node.kwargs['name'] == 'drive_bridge' for node in nodes)
+    aggregators = [action for action in actions
+                   if action.kwargs.get('package') == 'diagnostic_aggregator']
+    assert len(aggregators) == 1
+    for bad in ('', 'line1', 'line1=/a.yaml;line1=/b.yaml', '=/a.yaml'):
+        with pytest.raises(ValueError):
+            launch_file.parse_buses(bad)
 
 
 def test_launch_file_starts_the_lifecycle_node_with_the_params_file(launch_description):
