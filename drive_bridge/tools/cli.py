@@ -29,7 +29,7 @@ from drive_bridge.bus.device import BusDevice
 from drive_bridge.bus.runner import retryable, run_poll, TransactionRunner
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceReading, ParameterAccess, ParameterOptions
-from drive_bridge.devices.drive import COIL_STATUS, DriveProfile, PROCESS_COILS
+from drive_bridge.devices.drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
 from drive_bridge.devices.parameters import DATA_TYPES, parameter_address, ParameterSpec, TEXT
 from drive_bridge.errors import (
     CommandRefused, ConfigError, DeviceException, DriveBridgeError, LinkDown, ModelMismatch,
@@ -226,7 +226,7 @@ class Session:
 
     def number(self, text: str) -> int:
         """Return the PNU of ``text`` as the manual writes it (FC 3-41, VLT 205, MCD 4 or 1-4)."""
-        if isinstance(self.profile, DriveProfile) or text.isdigit():
+        if isinstance(self.profile, FcProfileDrive) or text.isdigit():
             return parse_parameter_number(text)
         model = self.resolve_model()
         entry = mcd_parameters.find(model, text)
@@ -594,6 +594,10 @@ def command_scan(args, out) -> int:
     """Try every address in the range; print what answers, with family and model."""
     first, last = parse_range(args.addresses)
     bus = bus_values_from(args)
+    if args.config:  # the bus of the parameters file, options winning; not its devices
+        from_file, _ = cfg.split_parameters(cfg.select_block(args.config, args.node))
+        bus = dict({key: value for key, value in from_file.items() if key != 'devices'},
+                   **bus)
     config = cfg.build_config(dict(bus, devices=['probe']),
                               {'probe': {'family': SCAN_FAMILIES[0], 'address': first}})
     runner = open_runner(config)  # one port for the whole scan
@@ -677,8 +681,8 @@ def probe_option_card(bus: Dict[str, Any], address: int, runner: TransactionRunn
     answers) still marks the card.
     """
     session = probe_session(bus, 'vlt', address, runner)
-    if session is None:
-        return ''
+    if session is None or ReadCoils not in PROTOCOLS[session.config.link.protocol].requests:
+        return ''  # the option card speaks Modbus only
     transact = session.runner.transact
     try:
         coils = transact(session.record, ReadCoils(COIL_STATUS, PROCESS_COILS))

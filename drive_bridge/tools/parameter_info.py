@@ -11,7 +11,7 @@ from typing import Any, Dict, Mapping, Optional
 
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceProfile, ParameterAccess, ParameterOptions
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.drive import FcProfileDrive
 from drive_bridge.devices.parameters import ParameterSpec, TEXT
 
 RAW_FACTORS: Dict[int, float] = {0: 1.0}  # MCD registers: raw values
@@ -35,14 +35,14 @@ def parameter_table(profile: DeviceProfile) -> Dict[int, ParameterSpec]:
 
 def conversion_factors(profile: DeviceProfile) -> Dict[int, float]:
     """Return the profile's conversion index -> factor table (raw registers: index 0 only)."""
-    if isinstance(profile, DriveProfile):
+    if isinstance(profile, FcProfileDrive):
         return profile.data.conversion_factors
     return RAW_FACTORS
 
 
 def label(profile: DeviceProfile, number: int) -> str:
     """Return a parameter number as the device's manual writes it on the bus (FC: 3-41)."""
-    if isinstance(profile, DriveProfile):
+    if isinstance(profile, FcProfileDrive):
         return profile.data.parameter_label(number)
     return str(number)
 
@@ -60,7 +60,7 @@ def spec_for(profile: DeviceProfile, number: int, options: ParameterOptions,
     known = (parameter_table(profile) if table is None else table).get(number)
     if options.data_type is None and options.conversion is None:
         return known
-    if not isinstance(profile, DriveProfile):
+    if not isinstance(profile, FcProfileDrive):
         return known  # raw registers: the profile refuses options that do not apply
     if known is not None and options.data_type in (None, known.data_type) and \
             options.conversion in (None, known.conversion):

@@ -99,6 +99,13 @@ def test_scan_finds_each_device_and_reports_a_vlt6000_card_as_an_option_card(lin
     assert not writes_to(line, 5) and not writes_to(line, 6)  # a scan only reads
 
 
+def test_scan_takes_the_bus_from_a_parameters_file(line, tmp_path):
+    code, out = run('scan', '--config', params_file(tmp_path, line), '--addresses', '1-1',
+                    '--quiet')
+    assert code == 0 and out == 'address 1: fc fc51, state ready\n1 device(s) found at ' \
+        'addresses 1-1\n'
+
+
 def test_the_simulated_vlt6000_refuses_par_520_as_a_real_one_did(line):
     code, _ = run('get', *bus(line), '--family', 'vlt', '--model', 'vlt6000', '--address', 6,
                   520, '--type', 'uint32', '--conversion', -2)
