@@ -656,7 +656,8 @@ def scan_address(bus: Dict[str, Any], address: int, runner: TransactionRunner) -
             if session is None:
                 continue
             reading = session.poll()
-            return f'{family} {session.profile.model}, state {reading.state}'
+            return unknown_drive_type(session.profile, reading.state) or \
+                f'{family} {session.profile.model}, state {reading.state}'
         except LinkDown as error:
             raise CliError(str(error)) from None
         except NoResponse:
@@ -669,6 +670,19 @@ def scan_address(bus: Dict[str, Any], address: int, runner: TransactionRunner) -
                 session.close()
     return probe_option_card(bus, address, runner) or \
         'something answers, but not as any supported family'
+
+
+def unknown_drive_type(profile, state: str) -> str:
+    """Return what an FC-profile drive that does not tell its type is ('' if it does)."""
+    if not isinstance(profile, FcProfileDrive) or profile.data.identify_parameter is None:
+        return ''
+    type_text = profile.identity.get('drive_type', '')
+    if profile.data.model_from_type(type_text) is not None:
+        return ''
+    told = f'par. 15-40 reads {type_text!r}' if type_text and \
+        not type_text.startswith('not readable') else 'par. 15-40 not readable'
+    return f'a drive that does not tell its FC type ({told}): a VLT 5000/6000? set family ' \
+        f'vlt with model vlt5000 or vlt6000, state {state}'
 
 
 def probe_option_card(bus: Dict[str, Any], address: int, runner: TransactionRunner) -> str:

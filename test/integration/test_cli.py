@@ -21,6 +21,7 @@ import time
 from drive_bridge.bus.runner import TransactionRunner
 from drive_bridge.protocol import rtu
 from drive_bridge.sim.devices import make_sim_server
+from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from drive_bridge.tools.cli import main
 import pytest
 import yaml
@@ -104,6 +105,22 @@ def test_scan_takes_the_bus_from_a_parameters_file(line, tmp_path):
                     '--quiet')
     assert code == 0 and out == 'address 1: fc fc51, state ready\n1 device(s) found at ' \
         'addresses 1-1\n'
+
+
+def test_scan_on_the_fc_protocol_tells_a_drive_that_does_not_tell_its_type():
+    server = make_fc_protocol_server({1: 'fc51', 2: 'vlt6000'})
+    port = f'socket://127.0.0.1:{server.open_tcp()}'
+    server.start()
+    try:
+        code, out = run('scan', '--port', port, '--protocol', 'fc_protocol', '--addresses',
+                        '1-3', '--timeout', 0.5, '--quiet')
+    finally:
+        server.stop()
+    assert code == 0 and out.splitlines() == [
+        'address 1: fc fc51, state ready',
+        'address 2: a drive that does not tell its FC type (par. 15-40 not readable): a VLT '
+        '5000/6000? set family vlt with model vlt5000 or vlt6000, state ready',
+        '2 device(s) found at addresses 1-3']
 
 
 def test_the_simulated_vlt6000_refuses_par_520_as_a_real_one_did(line):
