@@ -21,7 +21,7 @@ setup(
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),
     ],
-    install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5'],
+    install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5', 'tqdm>=4.66'],
     extras_require={'recording': ['rosbags>=0.10.11', 'matplotlib>=3.6']},
     tests_require=['pytest'],  # colcon test runs pytest when this names it
     zip_safe=True,

@@ -19,7 +19,7 @@ import math
 from typing import Deque, Dict, Optional
 
 from drive_bridge.devices import fc, vlt
-from drive_bridge.devices.parameters import DATA_TYPES, TEXT
+from drive_bridge.devices.parameters import DATA_TYPES, ParameterSpec, TEXT
 from drive_bridge.protocol import fc_control as ctl, fc_scaling
 from drive_bridge.protocol.words import join_u32, registers_to_text, text_to_registers
 
@@ -28,6 +28,13 @@ ALARM_CONTROL_WORD_TIMEOUT = 4
 ALARM_OVER_CURRENT = 5
 # Par. 8-04 control word timeout functions (protocols.md, FC 102 list).
 TIMEOUT_OFF, TIMEOUT_FREEZE, TIMEOUT_STOP, TIMEOUT_JOG, TIMEOUT_MAX, TIMEOUT_TRIP = range(6)
+# A VLT parameter outside the bridge's table, so that reading one with --type and
+# --conversion can be shown and tested: par. 205 Maximum Reference (MG.90.D1.02 "Size
+# attribute": a reference in Hz with conversion index -3; int32 as the VLT 5000 list has it).
+VLT_BEYOND_TABLE = ParameterSpec(205, 'Maximum Reference', 'int32', -3, setting=None)
+VLT_MAXIMUM_REFERENCE_RAW = 50000  # 50.000 Hz
+# Motor current readout of each VLT model (the other model's number is no parameter there).
+VLT_CURRENT_PARAMETER = {'vlt5000': 520, 'vlt6000': 514}
 # Detail codes of register 7 (manual 004 section 5.3.2).
 NO_SUCH_PARAMETER, NO_WRITE_ACCESS, VALUE_OUT_OF_LIMITS = 0, 1, 2
 TYPE_MISMATCH, NOT_IN_THIS_MODE = 5, 17
@@ -67,7 +74,10 @@ class FcModel:
     def __init__(self, config: Optional[FcSimConfig] = None, now_s: float = 0.0):
         self.config = config or FcSimConfig()
         self.family = 'vlt' if self.config.model.startswith('vlt') else 'fc'
-        self.table = vlt.PARAMETERS if self.family == 'vlt' else fc.PARAMETERS
+        data = vlt.DATA if self.family == 'vlt' else fc.DATA
+        self.table: Dict[int, ParameterSpec] = dict(data.table(self.config.model))
+        if self.family == 'vlt':
+            self.table[VLT_BEYOND_TABLE.number] = VLT_BEYOND_TABLE
         self.now_s = now_s
         self.control_word = 0  # last control word received (0 = not yet)
         self.reference_word = 0
@@ -89,8 +99,12 @@ class FcModel:
         self.parameters.update({
             124: round(self.config.motor_current_a * 100),
             803: round(self.config.ctw_timeout_s * 10), 804: self.config.ctw_timeout_function,
-            734: 0, 3: 0,
-        } if self.family == 'fc' else {104: 50, 533: ''})
+            3: 0,
+        } if self.family == 'fc' else {
+            104: 50, VLT_BEYOND_TABLE.number: VLT_MAXIMUM_REFERENCE_RAW})
+        for number, spec in self.table.items():  # every setting of the table has a value
+            if spec.setting:
+                self.parameters.setdefault(number, initial_raw(spec, data.conversion_factors))
         self.parameters.update(self.config.extra_parameters)
         self.index = 0  # FC: register 9; option card: IND, register 1
         self.card_timeouts = [0, 0]  # option card registers 2 and 3, 10 ms units
@@ -246,9 +260,9 @@ class FcModel:
         """Return the live value of a readout parameter (raw units), or None."""
         current_x100 = round(self.motor_current_a() * 100)
         if self.family == 'vlt':
-            return {514: current_x100, 520: current_x100, 538: self.alarm_word,
-                    540: self.warning_word(), 541: int(self.output_pct != self.target_pct()),
-                    953: 0}.get(number)
+            return {VLT_CURRENT_PARAMETER[self.config.model]: current_x100,
+                    538: self.alarm_word, 540: self.warning_word(),
+                    541: int(self.output_pct != self.target_pct()), 953: 0}.get(number)
         frequency_x10 = round(abs(self.output_pct) * self.config.motor_frequency_hz / 10.0)
         values = {
             1540: self.config.type_text, 1543: self.config.software_version,
@@ -271,9 +285,11 @@ class FcModel:
             raise ParameterError(NO_SUCH_PARAMETER)
         if isinstance(value, str):
             self._check_text_mode(vlt.TEXT_READ_INDEX)
+            stored = text_to_registers(value, len(value) + len(value) % 2)
+            if self.family == 'vlt':  # manual 003 "Text Blocks": space filled to the request
+                return (stored + [0x2020] * count)[:count]
             # Manual 004 section 5.4.4: a longer request gets a truncated answer.
-            stored = (len(value) + 1) // 2
-            return text_to_registers(value, 2 * stored)[:count]
+            return stored[:count]
         registers = self._registers(number)
         if count > registers:
             raise ParameterError(TYPE_MISMATCH)
@@ -313,3 +329,13 @@ class FcModel:
         if spec is None or spec.data_type == TEXT:
             return 1
         return DATA_TYPES[spec.data_type][0]
+
+
+def initial_raw(spec: ParameterSpec, factors: Dict[int, float]) -> object:
+    """Return the raw value a simulated drive starts with: the default, else the minimum."""
+    if spec.data_type == TEXT:
+        return str(spec.default or '')
+    value = spec.default if spec.default is not None else spec.minimum
+    if value is None:
+        value = min(spec.options) if spec.options else 0
+    return round(value / factors.get(spec.conversion, 1.0))

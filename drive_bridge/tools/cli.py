@@ -3,30 +3,50 @@
 
 Subcommands: ``scan`` (find devices in an address range, tell family and model), ``status``
 (one device, decoded), ``get``/``set`` (a parameter by its manual number, with conversion
-and units), ``backup``/``restore`` (parameters to and from YAML, with progress and a verify
-pass) and ``monitor`` (live status). The bus comes from the node's parameters file
-(``--config line.yaml --device conv``) or from options (``--port /dev/ttyUSB0 --family fc
---address 1``). Exit status: 0 done, 1 the bus or device failed, 2 a bad argument.
+and units), ``backup``/``restore`` (parameters to and from YAML, checked and verified) and
+``monitor`` (live status). The bus comes from the node's parameters file (``--config
+line.yaml --device conv``) or from options (``--port /dev/ttyUSB0 --family fc --address
+1``).
+
+Every transaction goes through the bus's transaction runner, as in the node: a write to a
+monitor-only device (``allow_control: false``) is refused unless ``--force`` is given for
+that command, a parameter number on process data or control registers is refused by the
+profile, and an exception 04 is explained with the drive's register 7. ``restore`` checks
+the whole file (device, family, model, every number, type, limit and option) before it
+writes anything. Progress goes to stderr, and only while stderr is a terminal. Exit status:
+0 done, 1 the bus or device failed, 2 a bad argument or file, 130 interrupted (Ctrl-C).
 """
 
 import argparse
+from dataclasses import replace
 import sys
+import textwrap
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from drive_bridge import config as cfg
 from drive_bridge.bus.device import BusDevice
-from drive_bridge.bus.runner import run_poll, TransactionRunner
+from drive_bridge.bus.runner import retryable, run_poll, TransactionRunner
+from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceReading, ParameterAccess, ParameterOptions
-from drive_bridge.devices.drive import DriveProfile
-from drive_bridge.devices.parameters import DATA_TYPES, TEXT
+from drive_bridge.devices.drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
+from drive_bridge.devices.parameters import DATA_TYPES, parameter_address, ParameterSpec, TEXT
 from drive_bridge.errors import (
     CommandRefused, ConfigError, DeviceException, DriveBridgeError, LinkDown, ModelMismatch,
-    NoResponse, ProtocolError, TransportError)
+    MonitorOnly, NoResponse, ProtocolError, TransportError)
+from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.requests import ReadCoils, ReadRegisters
+from drive_bridge.protocol.words import coils_to_words
+from drive_bridge.tools import backup_file, parameter_info as info
 from drive_bridge.transport.protocols import PROTOCOLS
 
-EXIT_FAILED, EXIT_USAGE = 1, 2
-SCAN_FAMILIES = ('fc', 'mcd', 'vlt')  # the order a scan tries them in (see scan_address)
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+SCAN_FAMILIES = ('fc', 'mcd')  # asked in this order; then the VLT option card (see scan)
+# Exception codes only the VLT option card answers (its drive's FC-protocol error codes and
+# its own 64-67, 255); a Modbus device answers 01-0B.
+OPTION_CARD_CODES = frozenset({0, 17, 64, 65, 66, 67, 130, 131, 255})
+VLT_COMMON_PARAMETER = 538  # the alarm word: both VLT 5000 and VLT 6000 have it
+MAX_REASONS_SHOWN = 20
 
 
 class CliError(Exception):
@@ -37,42 +57,68 @@ class CliError(Exception):
         self.code = code
 
 
+class Interrupted(CliError):
+    """Ctrl-C, with what was done by then."""
+
+    def __init__(self, text: str = 'interrupted'):
+        super().__init__(text, EXIT_INTERRUPTED)
+
+
+def warn(text: str) -> None:
+    """Print a warning line on stderr."""
+    print(f'drive-bridge: WARNING: {text}', file=sys.stderr, flush=True)
+
+
 # -- the bus and the device ----------------------------------------------------------------
-def load_params_file(path: str, node: Optional[str] = None) \
-        -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]]]:
-    """Return (bus values, device blocks) of the node's block in a parameters file."""
-    return cfg.split_parameters(cfg.select_block(path, node))
-
-
 def bus_values_from(args: argparse.Namespace) -> Dict[str, Any]:
     """Return the bus settings given as options (only those given)."""
     names = ('protocol', 'port', 'host', 'tcp_port', 'baudrate', 'parity', 'stopbits',
              'timeout')
-    return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
+    return {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
 
 
-def make_bus(args: argparse.Namespace, device_values: Optional[Dict[str, Any]] = None):
+def make_bus(args: argparse.Namespace):
     """Return (BridgeConfig, DeviceConfig) for the device the arguments name."""
     if args.config:
-        bus, devices = load_params_file(args.config, getattr(args, 'node', None))
+        bus, devices = cfg.split_parameters(cfg.select_block(args.config, args.node))
         bus.update(bus_values_from(args))
         name = args.device or (bus.get('devices') or [None])[0]
         if name not in devices:
             raise ConfigError(f'device {name!r} is not in {args.config}: it has '
                               f'{", ".join(devices) or "no device blocks"}')
-        values = dict(devices[name], **(device_values or {}))
+        values = dict(devices[name])
+        for option in ('family', 'model', 'address'):
+            if getattr(args, option, None) is not None:
+                values[option] = getattr(args, option)
     else:
-        if args.family is None and device_values is None:
+        if args.family is None or args.address is None:
             raise ConfigError('name the device: --config FILE [--device NAME], or --family '
                               'with --address')
         bus = bus_values_from(args)
         name = f'{args.family}_{args.address}'
         values = {'family': args.family, 'address': args.address, 'model': args.model}
         values = {key: value for key, value in values.items() if value is not None}
-        values.update(device_values or {})
     bus['devices'] = [name]
     config = cfg.build_config(bus, {name: values})
     return config, config.devices[0]
+
+
+def allow_writes(args: argparse.Namespace, config, device):
+    """
+    Return (config, device) for a command that writes: refuse a monitor-only device.
+
+    With ``--force`` the device's ``allow_control`` is overridden for this command only,
+    and a warning line naming it goes to stderr.
+    """
+    if device.allow_control:
+        return config, device
+    if not args.force:
+        raise CliError(f'{device.name} is monitor only (allow_control: false): nothing '
+                       'written; give --force to write to it for this command only', EXIT_USAGE)
+    warn(f'{device.name} is configured allow_control: false (monitor only); --force writes '
+         'to it for this command only')
+    device = replace(device, allow_control=True)
+    return replace(config, devices=[device]), device
 
 
 class Session:
@@ -80,56 +126,146 @@ class Session:
     One device on an open bus; transactions run here, in this thread.
 
     They go through the bus's transaction runner, so the same checks hold as in the node:
-    a monitor-only device (``allow_control: false``) gets no write at all.
+    a monitor-only device (``allow_control: false``) gets no write at all, and a refusal is
+    explained as the node explains it (exception 04: register 7 read for the detail).
     """
 
-    def __init__(self, config, device):
+    def __init__(self, config, device, runner: Optional[TransactionRunner] = None):
         self.config = config
         self.device = device
         self.record = BusDevice(device.make_spec(), time.monotonic())
         self.profile = self.record.profile
-        self.transport = config.make_transport()
-        self.runner = TransactionRunner(self.transport, config.timing.frame_gap_s)
-        self.transport.connect()
+        self._owns_port = runner is None  # else a port another session opened (scan)
+        self.runner = runner or open_runner(config)
         self._polled = False
+        self._table: Optional[Dict[int, ParameterSpec]] = None
+
+    @property
+    def name(self) -> str:
+        """Return the device's name."""
+        return self.device.name
 
     def close(self) -> None:
-        """Close the port."""
-        self.transport.close()
+        """Close the port, if this session opened it."""
+        if self._owns_port:
+            self.runner.transport.close()
 
-    def run(self, requests: Sequence[object]) -> list:
+    def run(self, requests: Sequence[object], doing: str = '') -> list:
         """Run requests in order; a refusal is a CliError in the device's words."""
         results = []
         for request in requests:
             try:
-                results.append(self.runner.transact(self.record, request))
+                results.append(self._transact(request))
             except DeviceException as error:
-                raise CliError(f'{self.device.name} refused it: '
+                what = f' {doing}' if doing else ' it'
+                raise CliError(f'{self.name} refused{what}: '
                                f'{self.runner.explain(self.record, error)}') from None
+            except TransportError as error:
+                if not doing or isinstance(error, LinkDown):
+                    raise
+                raise CliError(f'{self.name}: {doing}: {error}') from None
         return results
+
+    def _transact(self, request) -> Any:
+        """Run one request; a read is repeated after a lost or garbled reply, as the node does."""
+        attempt = 0
+        while True:
+            try:
+                return self.runner.transact(self.record, request)
+            except TransportError as error:
+                if request.writes or not retryable(error) or \
+                        attempt >= self.config.timing.retries:
+                    raise
+                attempt += 1
 
     def poll(self) -> DeviceReading:
         """Read the device once and return its decoded reading."""
         try:
-            reading = run_poll(self.runner, self.record)
+            reading = run_poll(self.runner, self.record, self.config.timing.retries)
         except DeviceException as error:
-            raise CliError(f'{self.device.name} refused the poll: '
+            raise CliError(f'{self.name} refused the poll: '
                            f'{self.runner.explain(self.record, error)}') from None
         self._polled = True
         return reading
 
+    def resolve_model(self) -> str:
+        """Return the model; with model auto, poll once so that the device tells it."""
+        if self.profile.configured_model == 'auto' and not self._polled:
+            self.poll()
+            self._table = None
+        return self.profile.model
+
+    # -- parameters ---------------------------------------------------------------------
+    def require_parameters(self) -> ParameterAccess:
+        """Return the profile if it has parameter access, else raise CliError."""
+        if not isinstance(self.profile, ParameterAccess):
+            raise CliError(f'{self.name} ({self.device.family}) has no parameter access',
+                           EXIT_USAGE)
+        return self.profile
+
+    def table(self) -> Dict[int, ParameterSpec]:
+        """Return what is known of each parameter of the device's model."""
+        if self._table is None:
+            self.resolve_model()
+            self._table = info.parameter_table(self.profile)
+        return self._table
+
+    @property
+    def factors(self) -> Dict[int, float]:
+        """Return the conversion factors of the device's family."""
+        return info.conversion_factors(self.profile)
+
+    def label(self, number: int) -> str:
+        """Return parameter ``number`` as the bus numbers it (FC: 3-41; MCD: 4)."""
+        return info.label(self.profile, number)
+
+    def manual_number(self, number: int) -> str:
+        """Return parameter ``number`` as its manual writes it (FC: 3-41; MCD 500: 1-4)."""
+        spec = self.table().get(number)
+        return spec.label if spec is not None and spec.label else self.label(number)
+
+    def number(self, text: str) -> int:
+        """Return the PNU of ``text`` as the manual writes it (FC 3-41, VLT 205, MCD 4 or 1-4)."""
+        if isinstance(self.profile, FcProfileDrive) or text.isdigit():
+            return parse_parameter_number(text)
+        model = self.resolve_model()
+        entry = mcd_parameters.find(model, text)
+        if entry is None or entry.serial_number is None:
+            known = 'not in the table' if entry is None else 'without a known register'
+            raise CliError(f'parameter {text}: {known} of the {model}; give the Modbus '
+                           "Module's parameter number (manual 000 section 6: Parameter N is "
+                           'register 40008 + N), e.g. 4 for 1-4', EXIT_USAGE)
+        return entry.serial_number
+
+    def spec(self, number: int, options: ParameterOptions) -> Optional[ParameterSpec]:
+        """Return how ``number`` is read and written with ``options`` (None: not known)."""
+        self.require_parameters()
+        return info.spec_for(self.profile, number, options, self.table())
+
     def parameter(self, number: int, value=None, options: ParameterOptions = ParameterOptions()):
         """Read (value None) or write one parameter; return its value or the outcome."""
-        if not isinstance(self.profile, ParameterAccess):
-            raise CliError(f'{self.device.name} ({self.device.family}) has no parameter '
-                           'access', EXIT_USAGE)
-        if self.profile.configured_model == 'auto' and not self._polled:
-            self.poll()  # model auto: the parameter map depends on what the device is
-        plan = self.profile.parameter_plan(number, value, options)
-        return plan.decode(self.run(plan.transactions))
+        profile = self.require_parameters()
+        self.resolve_model()  # model auto: the parameter map depends on what the device is
+        plan = profile.parameter_plan(number, value, options)
+        if any(request.writes for request in plan.transactions) and \
+                not self.record.owner.writes_allowed:  # as the node: nothing of the plan sent
+            raise MonitorOnly(f'{self.name} is monitor only (allow_control: false): '
+                              f'{plan.label} not sent')
+        results = self.run(plan.transactions, plan.label)
+        try:
+            return plan.decode(results)
+        except (ValueError, IndexError, TypeError) as error:
+            raise CliError(f'{self.name}: {plan.label}: the reply does not decode: '
+                           f'{error}') from None
 
 
-# -- parameter numbers, values and tables ---------------------------------------------------
+def open_runner(config) -> TransactionRunner:
+    """Open the bus's port (exclusively) and return a transaction runner on it."""
+    transport = config.make_transport()
+    transport.connect()
+    return TransactionRunner(transport, config.timing.frame_gap_s)
+
+
 def parse_parameter_number(text: str) -> int:
     """Return the number of ``3-41`` (FC style: 341), ``16-14`` (1614) or ``205``."""
     group, dash, index = text.partition('-')
@@ -144,55 +280,57 @@ def parse_parameter_number(text: str) -> int:
                        '16-14 or 205', EXIT_USAGE) from None
 
 
-def parse_value(text: str):
-    """Return an int, a float or the text itself."""
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            continue
-    return text
-
-
-def parameter_options(args: argparse.Namespace, eeprom: bool = False) -> ParameterOptions:
+def parameter_options(args: argparse.Namespace) -> ParameterOptions:
     """Return the drive parameter options given (type, conversion index, array index)."""
     return ParameterOptions(data_type=getattr(args, 'type', None),
                             conversion=getattr(args, 'conversion', None),
-                            index=getattr(args, 'index', None), eeprom=eeprom)
+                            index=getattr(args, 'index', None))
 
 
-def describe_parameter(session: Session, number: int, options: ParameterOptions) -> str:
-    """Return 'name' and where the definition came from, for drives; '' otherwise."""
-    if not isinstance(session.profile, DriveProfile):
-        return ''
-    spec = session.profile.data.spec(number, options.data_type, options.conversion)
-    return f'{spec.name} ({spec.data_type}, conversion index {spec.conversion})'
+def with_session(args, action: Callable[[Session], None], writes: bool = False) -> None:
+    """Open the bus for the named device, run ``action``, close the bus."""
+    config, device = make_bus(args)
+    if writes:
+        config, device = allow_writes(args, config, device)
+    session = Session(config, device)
+    try:
+        action(session)
+    finally:
+        session.close()
 
 
-def backup_numbers(session: Session) -> List[int]:
-    """Return the parameters a backup covers for this device."""
-    profile = session.profile
-    if profile.configured_model == 'auto':
-        session.poll()  # model auto: the parameter count depends on the model
-    numbers = list(profile.parameter_numbers()) if isinstance(profile, ParameterAccess) \
-        else []
-    if not numbers:
-        raise CliError(f'{session.device.name} ({session.device.family}) has no parameter '
-                       'access')
-    return sorted(numbers)
+class Progress:
+    """A tqdm bar on stderr while stderr is a terminal: never on stdout, never in a pipe."""
+
+    def __init__(self, total: int, label: str, args, out, unit: str = 'parameter'):
+        self.out = out
+        self.bar = None
+        if not getattr(args, 'quiet', False) and sys.stderr.isatty():
+            from tqdm import tqdm
+            self.bar = tqdm(total=total, desc=label, unit=f' {unit}', file=sys.stderr,
+                            leave=False, dynamic_ncols=True)
+
+    def __enter__(self) -> 'Progress':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+    def step(self) -> None:
+        """Count one done."""
+        if self.bar is not None:
+            self.bar.update(1)
+
+    def emit(self, line: str) -> None:
+        """Print a result line on ``out`` (the bar, on stderr, is redrawn below it)."""
+        if self.bar is not None:
+            self.bar.write(line, file=self.out)
+        else:
+            print(line, file=self.out, flush=True)
 
 
-def progress(done: int, total: int, label: str, stream=sys.stderr) -> None:
-    """Draw a text progress bar on one line."""
-    width = 30
-    filled = width * done // max(1, total)
-    stream.write(f'\r{label} [{"#" * filled}{"." * (width - filled)}] {done}/{total}')
-    if done >= total:
-        stream.write('\n')
-    stream.flush()
-
-
-# -- subcommands ----------------------------------------------------------------------------
+# -- status and monitor ---------------------------------------------------------------------
 def reading_lines(reading: DeviceReading) -> List[str]:
     """Return a reading as 'key: value' lines."""
     lines = [f'state: {reading.state}', f'status word: 0x{reading.status_word:04X}',
@@ -217,121 +355,12 @@ def command_status(args, out) -> int:
     """Print one device's decoded status."""
     def status(session: Session) -> None:
         lines = reading_lines(session.poll())
-        print(f'{session.device.name}: {session.device.family} {_model(session)} at address '
+        print(f'{session.name}: {session.device.family} {session.profile.model} at address '
               f'{session.device.address}', file=out)
         for line in lines:
             print(f'  {line}', file=out)
     with_session(args, status)
-    return 0
-
-
-def _model(session: Session) -> str:
-    return session.profile.model
-
-
-def command_get(args, out) -> int:
-    """Print one parameter's value."""
-    number = parse_parameter_number(args.parameter)
-
-    def get(session: Session) -> None:
-        options = parameter_options(args)
-        value = session.parameter(number, options=options)
-        about = describe_parameter(session, number, options)
-        print(f'{args.parameter} = {value}' + (f'  # {about}' if about else ''), file=out)
-    with_session(args, get)
-    return 0
-
-
-def command_set(args, out) -> int:
-    """Write one parameter, then read it back."""
-    number = parse_parameter_number(args.parameter)
-    value = parse_value(args.value)
-
-    def set_(session: Session) -> None:
-        options = parameter_options(args)
-        print(session.parameter(number, value, parameter_options(args, args.eeprom)), file=out)
-        print(f'{args.parameter} = {session.parameter(number, options=options)} (read back)',
-              file=out)
-    with_session(args, set_)
-    return 0
-
-
-def command_backup(args, out) -> int:
-    """Read every parameter of a device into a YAML file, then verify it."""
-    import yaml
-
-    def backup(session: Session) -> None:
-        numbers = backup_numbers(session)
-        values = read_all(session, numbers, 'reading', args)
-        verify = read_all(session, numbers, 'verifying', args)
-        changed = [number for number in numbers if verify[number] != values[number]]
-        if changed:
-            raise CliError(f'{len(changed)} parameters changed while backing up (first: '
-                           f'{changed[0]}): run the backup again with the device stopped')
-        document = {'device': session.device.name, 'family': session.device.family,
-                    'model': _model(session), 'address': session.device.address,
-                    'parameters': values}
-        with open(args.file, 'w') as stream:
-            yaml.safe_dump(document, stream, sort_keys=False)
-        print(f'{len(values)} parameters of {session.device.name} saved to {args.file} '
-              'and verified', file=out)
-    with_session(args, backup)
-    return 0
-
-
-def read_all(session: Session, numbers: List[int], label: str, args) -> Dict[int, Any]:
-    """Read each parameter in ``numbers``, drawing progress."""
-    values = {}
-    for done, number in enumerate(numbers, 1):
-        values[number] = session.parameter(number)
-        if not args.quiet:
-            progress(done, len(numbers), label)
-    return values
-
-
-def command_restore(args, out) -> int:
-    """Write the parameters of a backup file, then read them back to verify."""
-    document = load_backup(args.file)
-
-    def restore(session: Session) -> None:
-        if document.get('family') != session.device.family:
-            raise CliError(f'{args.file} is a backup of a {document.get("family")} device; '
-                           f'{session.device.name} is {session.device.family}', EXIT_USAGE)
-        values = document['parameters']
-        options = ParameterOptions(eeprom=args.eeprom)
-        for done, (number, value) in enumerate(values.items(), 1):
-            session.parameter(number, value, options)
-            if not args.quiet:
-                progress(done, len(values), 'writing')
-        verify = read_all(session, list(values), 'verifying', args)
-        different = {number: (values[number], verify[number]) for number in values
-                     if verify[number] != values[number]}
-        if different:
-            number, (wanted, got) = next(iter(different.items()))
-            raise CliError(f'verify failed for {len(different)} parameters (first: '
-                           f'{number}: wrote {wanted!r}, reads {got!r})')
-        print(f'{len(values)} parameters restored to {session.device.name} and verified',
-              file=out)
-    with_session(args, restore)
-    return 0
-
-
-def load_backup(path: str) -> Dict[str, Any]:
-    """Return a backup document; raise CliError in words if it is not one."""
-    import yaml
-    try:
-        with open(path) as stream:
-            document = yaml.safe_load(stream)
-    except OSError as error:
-        raise CliError(f'cannot read {path}: {error.strerror}', EXIT_USAGE) from None
-    except yaml.YAMLError as error:
-        raise CliError(f'{path} is not valid YAML: {error}', EXIT_USAGE) from None
-    parameters = document.get('parameters') if isinstance(document, dict) else None
-    if not isinstance(parameters, dict) or not all(
-            isinstance(number, int) for number in parameters):
-        raise CliError(f'{path} is not a drive-bridge backup (no parameters: number -> '
-                       'value map)', EXIT_USAGE)
-    return document
+    return EXIT_OK
 
 
 def command_monitor(args, out) -> int:
@@ -346,25 +375,245 @@ def command_monitor(args, out) -> int:
                 line = f'no reading: {error}'
             print(f'{time.strftime("%H:%M:%S")}  {line}', file=out, flush=True)
             polls += 1
-            time.sleep(max(0.0, args.period - (time.monotonic() - started)))
+            if args.count == 0 or polls < args.count:
+                time.sleep(max(0.0, args.period - (time.monotonic() - started)))
     with_session(args, monitor)
-    return 0
+    return EXIT_OK
 
 
+# -- get and set ----------------------------------------------------------------------------
+def value_line(session: Session, number: int, spec: Optional[ParameterSpec], value: Any,
+               suffix: str = '') -> str:
+    """Return 'label = value unit  # name (type)' for a parameter value."""
+    shown_as = session.label(number)
+    about = info.describe(spec, shown_as)
+    text = f'{shown_as} = {info.format_value(spec, value, session.factors)}{suffix}'
+    return text + (f'  # {about}' if about else '')
+
+
+def command_get(args, out) -> int:
+    """Print one parameter's value."""
+    def get(session: Session) -> None:
+        number = session.number(args.parameter)
+        options = parameter_options(args)
+        spec = session.spec(number, options)
+        value = session.parameter(number, options=options)
+        print(value_line(session, number, spec, value), file=out)
+    with_session(args, get)
+    return EXIT_OK
+
+
+def command_set(args, out) -> int:
+    """Write one parameter (checked against the model's table first), then read it back."""
+    def set_(session: Session) -> None:
+        number = session.number(args.parameter)
+        options = parameter_options(args)
+        spec = session.spec(number, options)
+        value = info.parse_value(spec, args.value)
+        if spec is not None:
+            reason = backup_file.value_reason(spec, value, session.factors)
+            if reason:
+                raise CliError(f'{reason}: nothing written', EXIT_USAGE)
+        session.parameter(number, value, replace(options, eeprom=args.eeprom))
+        read = session.parameter(number, options=options)
+        if not info.same_value(value, read):
+            raise CliError(f'{session.label(number)}: wrote {value!r}, but it reads back '
+                           f'{read!r}')
+        print(value_line(session, number, spec, read, ' (written, read back)'), file=out)
+    with_session(args, set_, writes=True)
+    return EXIT_OK
+
+
+# -- backup and restore ---------------------------------------------------------------------
+def backup_rows(session: Session) -> List[Tuple[int, Optional[ParameterSpec]]]:
+    """Return (PNU, spec) of each parameter a backup covers, in order."""
+    profile = session.require_parameters()
+    session.resolve_model()  # model auto: the parameter numbers depend on the model
+    numbers = sorted(profile.parameter_numbers())
+    if not numbers:
+        raise CliError(f'{session.name} ({session.device.family} {profile.model}) has no '
+                       'parameters to back up', EXIT_USAGE)
+    table = session.table()
+    return [(number, table.get(number)) for number in numbers]
+
+
+def read_all(session: Session, numbers: List[int], label: str, args, out) -> Dict[int, Any]:
+    """Read each parameter in ``numbers`` (progress on a terminal)."""
+    values = {}
+    with Progress(len(numbers), label, args, out) as progress:
+        for number in numbers:
+            values[number] = session.parameter(number)
+            progress.step()
+    return values
+
+
+def command_backup(args, out) -> int:
+    """Read every parameter of a device into a YAML file, read them again to verify."""
+    def backup(session: Session) -> None:
+        rows = backup_rows(session)
+        numbers = [number for number, _ in rows]
+        try:
+            values = read_all(session, numbers, 'reading', args, out)
+            verify = read_all(session, numbers, 'verifying', args, out)
+        except KeyboardInterrupt:
+            raise Interrupted(f'interrupted: nothing saved to {args.file}') from None
+        changed = [number for number in numbers
+                   if not info.same_value(values[number], verify[number])]
+        if changed:
+            raise CliError(f'{len(changed)} parameters changed while backing up (first: '
+                           f'{session.label(changed[0])}): run the backup again with the '
+                           'device stopped; nothing saved')
+        for number, spec in rows:  # a value the table refuses: restore would refuse the file
+            reason = spec and backup_file.value_reason(spec, values[number], session.factors)
+            if reason:
+                warn(f'{reason}: the device holds it, but restore will refuse this file '
+                     'until it is changed')
+        content = backup_file.document(
+            session.name, session.device.family, session.profile.model,
+            session.device.address,
+            [backup_row(session, number, spec, values[number]) for number, spec in rows])
+        backup_file.write(args.file, content)
+        print(f'{len(rows)} parameters of {session.name} saved to {args.file} and verified',
+              file=out)
+    with_session(args, backup)
+    return EXIT_OK
+
+
+def backup_row(session: Session, number: int, spec: Optional[ParameterSpec],
+               value: Any) -> Dict[str, Any]:
+    """Return one parameter's entry of a backup file."""
+    return {'number': session.manual_number(number),
+            'pnu': number, 'name': spec.name if spec is not None else f'parameter {number}',
+            'unit': spec.unit if spec is not None else '',
+            'value': info.display_value(spec, value, session.factors)}
+
+
+def command_restore(args, out) -> int:
+    """Check a backup file whole, write it, then read every value back to verify."""
+    try:
+        backup = backup_file.load(args.file)
+    except backup_file.BackupError as error:
+        raise CliError(str(error), EXIT_USAGE) from None
+    config, device = make_bus(args)
+    if backup.family != device.family:
+        refuse_restore(backup, device.name, backup_file.kind_reasons(backup, device.family, ''))
+    identity = backup_file.identity_reasons(backup, device.name, device.address)
+    if identity and not args.force:
+        raise CliError(f'{args.file}: {"; ".join(identity)}: nothing written; give --force to '
+                       f'restore it to {device.name} all the same', EXIT_USAGE)
+    if identity:
+        warn(f'{"; ".join(identity)}: --force restores it to {device.name} all the same')
+    config, device = allow_writes(args, config, device)
+    session = Session(config, device)
+    try:
+        restore_checked(session, backup, args, out)
+    finally:
+        session.close()
+    return EXIT_OK
+
+
+def refuse_restore(backup, name: str, reasons: List[str], total: int = 0) -> None:
+    """Raise the CliError of a backup that may not be restored (nothing written)."""
+    if len(reasons) == 1 and not total:
+        raise CliError(f'{backup.path}: {reasons[0]}: nothing written to {name}', EXIT_USAGE)
+    shown = reasons[:MAX_REASONS_SHOWN]
+    more = len(reasons) - len(shown)
+    lines = [f'{backup.path}: nothing written to {name}: {len(reasons)} of {total} entries '
+             'cannot be restored:'] + [f'  {reason}' for reason in shown]
+    if more:
+        lines.append(f'  ... and {more} more')
+    raise CliError('\n'.join(lines), EXIT_USAGE)
+
+
+def restore_checked(session: Session, backup, args, out) -> None:
+    """Restore ``backup`` to the session's device if every entry fits its model."""
+    profile = session.require_parameters()
+    model = session.resolve_model()
+    reasons = backup_file.kind_reasons(backup, session.device.family, model)
+    if reasons:
+        refuse_restore(backup, session.name, reasons)
+    reasons = backup_file.entry_reasons(backup, session.table(), session.factors,
+                                        session.manual_number)
+    if reasons:
+        refuse_restore(backup, session.name, reasons, len(backup.entries))
+    values = backup.values()
+    write_all(session, values, ParameterOptions(eeprom=args.eeprom), args, out)
+    try:
+        verify = read_all(session, list(values), 'verifying', args, out)
+    except KeyboardInterrupt:
+        raise Interrupted(f'interrupted while verifying: all {len(values)} parameters were '
+                          f'written to {session.name}, not all read back') from None
+    different = [number for number in values
+                 if not info.same_value(values[number], verify[number])]
+    if different:
+        number = different[0]
+        raise CliError(f'verify failed for {len(different)} parameters (first: '
+                       f'{session.label(number)}: wrote {values[number]!r}, reads '
+                       f'{verify[number]!r})')
+    print(f'{len(values)} parameters restored to {profile.model} {session.name} and verified',
+          file=out)
+
+
+def write_all(session: Session, values: Dict[int, Any], options: ParameterOptions, args,
+              out) -> None:
+    """Write ``values`` in order; a failure or Ctrl-C says which were written."""
+    numbers = list(values)
+    written = 0
+    try:
+        with Progress(len(numbers), 'writing', args, out) as progress:
+            for number in numbers:
+                session.parameter(number, values[number], options)
+                written += 1
+                progress.step()
+    except KeyboardInterrupt:
+        raise Interrupted(f'interrupted: {how_far(session, numbers, written, True)}') from None
+    except (CliError, DriveBridgeError) as error:
+        raise CliError(f'{error}; {how_far(session, numbers, written)}') from None
+
+
+def how_far(session: Session, numbers: List[int], written: int,
+            interrupted: bool = False) -> str:
+    """Return which parameters of a restore were written (they are written in file order)."""
+    total = len(numbers)
+    if written == 0:
+        done = f'none of the {total} parameters was written'
+    else:
+        done = f'{written} of {total} parameters were written (entries 1-{written}, ' \
+               f'{session.manual_number(numbers[0])} to ' \
+               f'{session.manual_number(numbers[written - 1])})'
+    if written < total:
+        current = session.manual_number(numbers[written])
+        doubt = ' (its write may or may not have reached the device)' if interrupted else ''
+        done += f'; {current}{doubt} and the {total - written - 1} after it were not: ' \
+                f'{session.name} now holds a mix, restore the file again'
+    return done
+
+
+# -- scan -----------------------------------------------------------------------------------
 def command_scan(args, out) -> int:
     """Try every address in the range; print what answers, with family and model."""
     first, last = parse_range(args.addresses)
     bus = bus_values_from(args)
+    if args.config:  # the bus of the parameters file, options winning; not its devices
+        from_file, _ = cfg.split_parameters(cfg.select_block(args.config, args.node))
+        bus = dict({key: value for key, value in from_file.items() if key != 'devices'},
+                   **bus)
+    config = cfg.build_config(dict(bus, devices=['probe']),
+                              {'probe': {'family': SCAN_FAMILIES[0], 'address': first}})
+    runner = open_runner(config)  # one port for the whole scan
     found = 0
-    for address in range(first, last + 1):
-        result = scan_address(bus, address)
-        if not args.quiet:
-            progress(address - first + 1, last - first + 1, 'scanning')
-        if result:
-            found += 1
-            print(f'address {address}: {result}', file=out)
+    try:
+        with Progress(last - first + 1, 'scanning', args, out, unit='address') as progress:
+            for address in range(first, last + 1):
+                result = scan_address(bus, address, runner)
+                progress.step()
+                if result:
+                    found += 1
+                    progress.emit(f'address {address}: {result}')
+    finally:
+        runner.transport.close()
     print(f'{found} device(s) found at addresses {first}-{last}', file=out)
-    return 0
+    return EXIT_OK
 
 
 def parse_range(text: str) -> Tuple[int, int]:
@@ -380,27 +629,35 @@ def parse_range(text: str) -> Tuple[int, int]:
     return low, high
 
 
-def scan_address(bus: Dict[str, Any], address: int) -> str:
+def probe_session(bus: Dict[str, Any], family: str, address: int,
+                  runner: TransactionRunner) -> Optional[Session]:
+    """Return a session with a probe device of ``family`` at ``address``, or None."""
+    values = {'family': family, 'address': address,
+              'model': 'vlt6000' if family == 'vlt' else 'auto'}
+    try:  # no retries: silence at an address means nobody is there
+        config = cfg.build_config(dict(bus, devices=['probe'], retries=0), {'probe': values})
+    except ConfigError:
+        return None  # e.g. an MCD cannot sit at this address
+    return Session(config, config.devices[0], runner)
+
+
+def scan_address(bus: Dict[str, Any], address: int, runner: TransactionRunner) -> str:
     """
     Return what answers at ``address`` in words, or '' if nothing does.
 
     FC-series drives are asked for their type text (par. 15-40) first, then MCD starters
-    for their product word (40008); a device that answers neither but takes FC-profile
-    reads is reported as a VLT option card (the card cannot tell its model).
+    for their product word (40007); then the address is probed as a VLT 5000/6000 option
+    card (:func:`probe_option_card`). Silence at the first question ends the address.
     """
     for family in SCAN_FAMILIES:
-        if family == 'mcd' and address > 99:
-            continue
-        values = {'family': family, 'address': address,
-                  'model': 'vlt5000' if family == 'vlt' else 'auto'}
-        try:
-            config = cfg.build_config(dict(bus, devices=['probe']), {'probe': values})
-        except ConfigError:
-            continue
         session = None
         try:
-            session = Session(config, config.devices[0])
+            session = probe_session(bus, family, address, runner)
+            if session is None:
+                continue
             reading = session.poll()
+            return unknown_drive_type(session.profile, reading.state) or \
+                f'{family} {session.profile.model}, state {reading.state}'
         except LinkDown as error:
             raise CliError(str(error)) from None
         except NoResponse:
@@ -411,85 +668,215 @@ def scan_address(bus: Dict[str, Any], address: int) -> str:
         finally:
             if session is not None:
                 session.close()
-        if family == 'vlt':
-            return 'vlt (VLT 5000/6000 option card: set model vlt5000 or vlt6000), ' \
-                   f'state {reading.state}'
-        return f'{family} {_model(session)}, state {reading.state}'
-    return 'something answers, but not as any supported family'
+    return probe_option_card(bus, address, runner) or \
+        'something answers, but not as any supported family'
 
 
-def with_session(args, action: Callable[[Session], None]) -> None:
-    """Open the bus for the named device, run ``action``, close the bus."""
-    config, device = make_bus(args)
-    session = Session(config, device)
+def unknown_drive_type(profile, state: str) -> str:
+    """Return what an FC-profile drive that does not tell its type is ('' if it does)."""
+    if not isinstance(profile, FcProfileDrive) or profile.data.identify_parameter is None:
+        return ''
+    type_text = profile.identity.get('drive_type', '')
+    if profile.data.model_from_type(type_text) is not None:
+        return ''
+    told = f'par. 15-40 reads {type_text!r}' if type_text and \
+        not type_text.startswith('not readable') else 'par. 15-40 not readable'
+    return f'a drive that does not tell its FC type ({told}): a VLT 5000/6000? set family ' \
+        f'vlt with model vlt5000 or vlt6000, state {state}'
+
+
+def probe_option_card(bus: Dict[str, Any], address: int, runner: TransactionRunner) -> str:
+    """
+    Return what a VLT 5000/6000 option card at ``address`` says, or ''.
+
+    The card cannot tell which drive it sits in, so nothing model-specific is asked: the
+    FC-profile status coils, then par. 538 (the alarm word, on both models). A refusal with
+    one of the card's own codes (00 "no such parameter" ..., which no plain Modbus device
+    answers) still marks the card.
+    """
+    session = probe_session(bus, 'vlt', address, runner)
+    if session is None or ReadCoils not in PROTOCOLS[session.config.link.protocol].requests:
+        return ''  # the option card speaks Modbus only
+    transact = session.runner.transact
     try:
-        action(session)
+        coils = transact(session.record, ReadCoils(COIL_STATUS, PROCESS_COILS))
+        status_word, _ = coils_to_words(coils[:PROCESS_COILS])
+        try:
+            transact(session.record, ReadRegisters(parameter_address(VLT_COMMON_PARAMETER), 2))
+        except DeviceException as error:
+            if error.code not in OPTION_CARD_CODES:
+                return ''
+    except LinkDown as error:
+        raise CliError(str(error)) from None
+    except (TransportError, ProtocolError, ValueError, IndexError):
+        return ''
     finally:
         session.close()
+    return 'vlt (VLT 5000/6000 option card: set model vlt5000 or vlt6000), state ' \
+        f'{StatusWord(status_word).state(None, False)}'
 
 
 # -- command line ---------------------------------------------------------------------------
+DESCRIPTION = """\
+Commission Danfoss soft starters (MCD) and drives (FC 51, VLT 5000/6000) on an RS-485 bus or
+Modbus gateway, without ROS. The bus and the device come from the node's parameters file
+(--config FILE --device NAME) or from options (--port, --family, --address).
+
+Exit status: 0 done, 1 the bus or the device failed, 2 a bad argument or file,
+130 interrupted (Ctrl-C). Progress is drawn on stderr only when it is a terminal."""
+
+EXAMPLES = {
+    'scan': 'drive-bridge scan --port /dev/ttyUSB0 --addresses 1-32',
+    'status': 'drive-bridge status --config config/mixed_bus.yaml --device feeder',
+    'get': 'drive-bridge get --port /dev/ttyUSB0 --family fc --address 1 3-41\n'
+           '  drive-bridge get --port /dev/ttyUSB0 --family vlt --model vlt5000 --address 5 '
+           '205 --type int32 --conversion -3\n'
+           '  drive-bridge get --config config/mixed_bus.yaml --device crusher 4',
+    'set': 'drive-bridge set --port /dev/ttyUSB0 --family fc --address 1 3-41 4.25\n'
+           '  drive-bridge set --port /dev/ttyUSB0 --family vlt --model vlt6000 --address 6 '
+           '533 1234567890',
+    'backup': 'drive-bridge backup --config config/mixed_bus.yaml --device feeder feeder.yaml',
+    'restore': 'drive-bridge restore --config config/mixed_bus.yaml --device feeder '
+               'feeder.yaml',
+    'monitor': 'drive-bridge monitor --config config/mixed_bus.yaml --device feeder '
+               '--count 3',
+}
+
+SUBCOMMANDS = {
+    'scan': ('find devices in an address range',
+             'Ask every address in the range what it is: as an FC-series drive (par. 15-40), '
+             'as an MCD starter (product word 40007), then as a VLT 5000/6000 option card '
+             '(status coils and par. 538, which both models have; the card cannot tell the '
+             'model). An address that stays silent is skipped at once. Reads only.'),
+    'status': ('one device, decoded', 'Poll one device once and print its decoded state, '
+               'words, readouts and diagnostics. Reads only.'),
+    'get': ('read a parameter by its manual number',
+            'Read one parameter. Numbers as the manual writes them: FC 3-41 or 16-14, VLT '
+            "205, MCD 4 (the Modbus Module's parameter number) or its designation (1-4). "
+            'Values in display units (the conversion index applied), with the unit and the '
+            'table entry. A number outside the built-in table needs --type and '
+            '--conversion (drives). Reads only (a VLT text parameter writes the index '
+            'register IND first).'),
+    'set': ('write a parameter, then read it back',
+            'Write one parameter and read it back. The value is checked first against the '
+            "model's table (type, limits, options): nothing is written if it does not fit. "
+            'A text parameter takes the value as text (1234567890 stays text). Process data '
+            'and control registers (FC 51 50000 CTW ...) are no parameters and are refused: '
+            "use the node's commands. A device configured allow_control: false is refused "
+            'unless --force is given.'),
+    'backup': ('save all parameters to YAML and verify',
+               "Read every setting of the device (drives: the settings of the model's "
+               "table; MCD: parameters 1 to the model's last), read them all again, and "
+               'save them if nothing changed in between. The file names the device, model, '
+               'address and date, and for each parameter its number, PNU, name, unit and '
+               'value. Reads only.'),
+    'restore': ('write a YAML backup back and verify',
+                'Check the whole file first and write nothing unless all of it fits: family '
+                'and model (never overridable), device name and address (--force to restore '
+                "another device's backup), every number in the model's table and a "
+                'setting, every value within its type, limits and options. Then write each '
+                "parameter in the file's order and read every one back. A failure or "
+                'Ctrl-C part-way says which parameters were written.'),
+    'monitor': ('live decoded status (Ctrl-C ends)',
+                'Poll the device once a period and print one line each time, until Ctrl-C '
+                '(exit status 130) or --count polls. Reads only.'),
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``drive-bridge``."""
     parser = argparse.ArgumentParser(
-        prog='drive-bridge', description='Commission Danfoss starters and drives on a bus '
-        '(no ROS needed).')
-    commands = parser.add_subparsers(dest='command', required=True)
+        prog='drive-bridge', description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog='examples:\n' + '\n'.join(f'  {EXAMPLES[name]}' for name in
+                                         ('scan', 'get', 'set', 'backup', 'restore'))
+        + '\n\n"drive-bridge COMMAND --help" tells more of each command.')
+    commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     add = _subcommand_adder(commands)
-    scan = add('scan', command_scan, 'find devices in an address range', device=False)
-    scan.add_argument('--addresses', default='1-32', help='address range, e.g. 1-32')
-    add('status', command_status, 'one device, decoded')
-    get = add('get', command_get, 'read a parameter by its manual number')
-    get.add_argument('parameter', help='e.g. 3-41 (FC), 205 (VLT), 4 (MCD)')
+    scan = add('scan', command_scan, device=False)
+    scan.add_argument('--addresses', default='1-32', help='address range (default 1-32)')
+    add('status', command_status)
+    get = add('get', command_get)
+    get.add_argument('parameter', help='number as in the manual: FC 3-41, VLT 205, MCD 4 or 1-4')
     _parameter_options(get)
-    set_ = add('set', command_set, 'write a parameter, then read it back')
-    set_.add_argument('parameter')
-    set_.add_argument('value', help='in display units (e.g. 3.5 for 3.5 s)')
-    set_.add_argument('--eeprom', action='store_true', help='FC: store in EEPROM too')
+    set_ = add('set', command_set, writes=True)
+    set_.add_argument('parameter', help='number as in the manual: FC 3-41, VLT 205, MCD 4')
+    set_.add_argument('value', help='in display units (3.5 for 3.5 s), or the text of a text '
+                      'parameter')
+    _eeprom_option(set_)
     _parameter_options(set_)
-    backup = add('backup', command_backup, 'save all parameters to YAML and verify')
-    backup.add_argument('file')
-    restore = add('restore', command_restore, 'write a YAML backup back and verify')
-    restore.add_argument('file')
-    restore.add_argument('--eeprom', action='store_true', help='FC: store in EEPROM too')
-    monitor = add('monitor', command_monitor, 'live decoded status (Ctrl-C ends)')
-    monitor.add_argument('--period', type=float, default=0.5, help='seconds between polls')
+    backup = add('backup', command_backup)
+    backup.add_argument('file', help='the YAML file to write')
+    restore = add('restore', command_restore, writes=True)
+    restore.add_argument('file', help='a backup written by drive-bridge backup')
+    _eeprom_option(restore)
+    monitor = add('monitor', command_monitor)
+    monitor.add_argument('--period', type=float, default=0.5,
+                         help='seconds between polls (default 0.5)')
     monitor.add_argument('--count', type=int, default=0, help='stop after N polls (0: never)')
     return parser
 
 
 def _subcommand_adder(commands):
-    def add(name: str, function, help_text: str, device: bool = True):
-        sub = commands.add_parser(name, help=help_text, description=help_text)
+    def add(name: str, function, device: bool = True, writes: bool = False):
+        summary, description = SUBCOMMANDS[name]
+        sub = commands.add_parser(
+            name, help=summary, description=textwrap.fill(description, 79),
+            epilog=f'example:\n  '
+            f'{EXAMPLES[name]}', formatter_class=argparse.RawDescriptionHelpFormatter)
         sub.set_defaults(function=function)
         bus = sub.add_argument_group('bus (default: from --config, else the node defaults)')
-        bus.add_argument('--config', help="the node's parameters file (YAML)")
-        bus.add_argument('--protocol', choices=tuple(PROTOCOLS))
+        bus.add_argument('--config', metavar='FILE',
+                         help="the node's parameters file (YAML); options given here win")
         bus.add_argument('--node', help='the node block of --config (its full name, e.g. '
                          '/line1/drive_bridge) when the file has several')
-        bus.add_argument('--port', help='serial device or URL, e.g. /dev/ttyUSB0')
-        bus.add_argument('--host')
-        bus.add_argument('--tcp-port', dest='tcp_port', type=int)
-        bus.add_argument('--baudrate', type=int)
-        bus.add_argument('--parity', choices=('N', 'E', 'O'))
-        bus.add_argument('--stopbits', type=int, choices=(0, 1, 2))
-        bus.add_argument('--timeout', type=float, help='seconds per transaction')
+        bus.add_argument('--protocol', choices=tuple(PROTOCOLS))
+        bus.add_argument('--port', help='serial device or URL (default /dev/ttyUSB0)')
+        bus.add_argument('--host', help='gateway host (modbus_tcp, rtu_over_tcp)')
+        bus.add_argument('--tcp-port', dest='tcp_port', type=int, help='gateway TCP port')
+        bus.add_argument('--baudrate', type=int, help='default 9600')
+        bus.add_argument('--parity', choices=('N', 'E', 'O'), help='default E')
+        bus.add_argument('--stopbits', type=int, choices=(0, 1, 2),
+                         help='0 (default): 2 with no parity, 1 with parity')
+        bus.add_argument('--timeout', type=float, help='seconds per transaction (default 0.5)')
         sub.add_argument('--quiet', action='store_true', help='no progress bar')
         if device:
             chosen = sub.add_argument_group('device')
-            chosen.add_argument('--device', help='device name in --config')
+            chosen.add_argument('--device', help='device name in --config (default: the '
+                                'first)')
             chosen.add_argument('--family', choices=sorted(cfg.FAMILIES))
-            chosen.add_argument('--model')
+            chosen.add_argument('--model', help='e.g. fc51, vlt6000, mcd500 (default auto; '
+                                'VLT: required)')
             chosen.add_argument('--address', type=int)
+        if writes:
+            sub.add_argument('--force', action='store_true', help=FORCE_HELP[name])
         return sub
     return add
 
 
+FORCE_HELP = {
+    'set': 'write even though the device is configured allow_control: false (monitor only); '
+           'a warning names it',
+    'restore': 'restore to a device configured allow_control: false, or a backup taken of '
+               'another device name or address (family and model must still match); a '
+               'warning says so',
+}
+
+
+def _eeprom_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--eeprom', action='store_true',
+                        help='FC 51 and VLT 5000/6000: store the write in EEPROM as well as '
+                        'RAM (coil 65); without it the drive keeps it in RAM only. MCD: does '
+                        'not apply')
+
+
 def _parameter_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--type', choices=sorted(DATA_TYPES) + [TEXT],
-                        help='drives: data type of a parameter not in the built-in table')
-    parser.add_argument('--conversion', type=int, help='drives: conversion index')
-    parser.add_argument('--index', type=int, help='drives: array index')
+    group = parser.add_argument_group('drive parameters outside the built-in table (FC, VLT; '
+                                      'MCD registers are raw 16-bit values)')
+    group.add_argument('--type', choices=sorted(DATA_TYPES) + [TEXT],
+                       help='data type (manual: "Type")')
+    group.add_argument('--conversion', type=int, help='conversion index, e.g. -2 for 0.01')
+    group.add_argument('--index', type=int, help='array index of an array parameter')
 
 
 def main(argv: Optional[List[str]] = None, out=sys.stdout) -> int:
@@ -507,7 +894,8 @@ def main(argv: Optional[List[str]] = None, out=sys.stdout) -> int:
         print(f'drive-bridge: {error}', file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
-        return 0
+        print('drive-bridge: interrupted', file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == '__main__':

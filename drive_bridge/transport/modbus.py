@@ -18,6 +18,7 @@ from drive_bridge.protocol.requests import (
 from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import (  # noqa: F401 - LinkSettings, wire_time_s re-exported
     LinkSettings, open_hint, port_missing, wire_time_s)
+from drive_bridge.transport.port_owner import in_use_text, lock_holders
 import pymodbus
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -67,6 +68,8 @@ class ModbusTransport(Transport):
             raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}') from error
         if not ok:
             client.close()
+            if settings.is_serial and lock_holders(settings.port):  # pymodbus opens exclusively
+                raise LinkDown(f'bus offline: {in_use_text(settings.port)}')
             raise LinkDown(f'bus offline: cannot open {settings.describe()}'
                            + open_hint(settings))
         if hasattr(client, '_recv_interval'):

@@ -1,12 +1,21 @@
-"""The serial port that the native transports share: open, close, read until a deadline."""
+"""
+The serial port that the native transports share: open, close, read until a deadline.
 
+A local port is opened exclusively (POSIX: pyserial's ``exclusive=True``, an ``flock``), so
+that a second master (the node and ``drive-bridge`` on the same line) gets one clear line
+naming the holder instead of a line where two masters talk over each other.
+"""
+
+import errno
+import os
 import select
 import time
 from typing import Callable
 
 from drive_bridge.errors import LinkDown
 from drive_bridge.transport.base import Transport
-from drive_bridge.transport.link import LinkSettings, open_hint, port_missing
+from drive_bridge.transport.link import LinkSettings, open_hint, port_missing, URL_PREFIXES
+from drive_bridge.transport.port_owner import in_use_text
 import serial
 
 PARITIES = {'N': serial.PARITY_NONE, 'E': serial.PARITY_EVEN, 'O': serial.PARITY_ODD}
@@ -18,6 +27,17 @@ except ImportError:  # not POSIX
         """Placeholder where termios does not exist."""
 PORT_ERRORS = (serial.SerialException, OSError, TermiosError)
 EARLY_WAKE_S = 0.002  # how much before a reply's end a wait for it ends
+
+
+def exclusive_open(port: str) -> bool:
+    """Return whether ``port`` is opened exclusively (a local device on POSIX, not a URL)."""
+    return os.name == 'posix' and not port.startswith(URL_PREFIXES)
+
+
+def lock_refused(error: Exception) -> bool:
+    """Return whether opening failed because another program holds the port's lock."""
+    return 'exclusively lock' in str(error) or \
+        getattr(error, 'errno', None) in (errno.EAGAIN, errno.EWOULDBLOCK)
 
 
 class SerialPortTransport(Transport):
@@ -45,12 +65,16 @@ class SerialPortTransport(Transport):
         if port_missing(settings):
             raise LinkDown(f'bus offline: {settings.port} not found')
         parity, stopbits = self.framing()
+        exclusive = {'exclusive': True} if exclusive_open(settings.port) else {}
         try:
             self._port = self._open_port(
                 settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
                 parity=PARITIES[parity], stopbits=STOPBITS[stopbits],
-                timeout=0)  # reads return what is there; the waiting is done by select
+                timeout=0,  # reads return what is there; the waiting is done by select
+                **exclusive)
         except (*PORT_ERRORS, ValueError) as error:
+            if exclusive and lock_refused(error):
+                raise LinkDown(f'bus offline: {in_use_text(settings.port)}') from error
             raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}'
                            + open_hint(settings)) from error
 

@@ -1,17 +1,45 @@
-"""The drive-bridge commissioning CLI against the simulators on a pty (no ROS)."""
+"""
+The drive-bridge commissioning CLI against the simulators (no ROS).
 
+Every result is read from the simulated device, never from the CLI's own word.
+"""
+
+import datetime
+import fcntl
 import io
+import os
+import pty
+import re
+import shlex
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import time
 
+from drive_bridge.bus.runner import TransactionRunner
+from drive_bridge.protocol import rtu
 from drive_bridge.sim.devices import make_sim_server
+from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from drive_bridge.tools.cli import main
 import pytest
 import yaml
 
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+LINE = {1: 'fc51', 5: 'vlt5000', 6: 'vlt6000', 20: 'mcd500', 21: 'mcd3000'}
+FC51 = ['--family', 'fc', '--address', 1]
+MCD500 = ['--family', 'mcd', '--address', 20]
+README_LINE = {1: 'fc51', 5: 'vlt5000', 6: 'vlt6000', 20: 'mcd500'}  # as the README says
+WRITE_FUNCTIONS = (rtu.WRITE_SINGLE_COIL, rtu.WRITE_SINGLE_REGISTER, rtu.WRITE_MULTIPLE_COILS,
+                   rtu.WRITE_MULTIPLE_REGISTERS)
 
-@pytest.fixture(scope='module')
+
+@pytest.fixture
 def line():
-    server = make_sim_server({1: 'fc51', 5: 'vlt5000', 20: 'mcd500', 21: 'mcd3000'})
+    server = make_sim_server(LINE)
     server.open_pty()
+    server.record_frames = True
     server.start()
     yield server
     server.stop()
@@ -24,17 +52,81 @@ def run(*argv):
 
 
 def bus(line):
-    return ['--port', line.pty_path, '--parity', 'N', '--timeout', '0.1', '--quiet']
+    # 115200 baud: the runner keeps a 1.75 ms gap between frames instead of 9600's 4 ms.
+    return ['--port', line.pty_path, '--parity', 'N', '--baudrate', 115200, '--timeout', '0.5',
+            '--quiet']
 
 
-def test_scan_finds_each_device_with_family_and_model(line):
+def model(line, unit):
+    return line.devices[unit].model
+
+
+def writes_to(line, unit):
+    """Return the write requests the simulated line carried to ``unit``."""
+    return [frame for frame in list(line.stats.frames)
+            if frame[0] == unit and frame[1] in WRITE_FUNCTIONS]
+
+
+def params_file(tmp_path, line, allow_control=True, name='line.yaml'):
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump({'/**/drive_bridge': {'ros__parameters': {
+        'port': line.pty_path, 'parity': 'N', 'baudrate': 115200, 'timeout': 0.5,
+        'devices': ['feeder', 'crusher'],
+        'feeder': {'family': 'fc', 'model': 'fc51', 'address': 1,
+                   'allow_control': allow_control},
+        'crusher': {'family': 'mcd', 'model': 'mcd500', 'address': 20,
+                    'allow_control': allow_control}}}}))
+    return path
+
+
+def one_line(capsys):
+    error = capsys.readouterr().err
+    assert error.startswith('drive-bridge: ') and error.count('\n') == 1, error
+    return error
+
+
+# -- reads ----------------------------------------------------------------------------------
+def test_scan_finds_each_device_and_reports_a_vlt6000_card_as_an_option_card(line):
     code, out = run('scan', *bus(line), '--addresses', '1-22')
     assert code == 0
     assert 'address 1: fc fc51, state ready' in out
-    assert 'address 5: vlt (VLT 5000/6000 option card' in out
+    card = 'vlt (VLT 5000/6000 option card: set model vlt5000 or vlt6000), state ready'
+    assert f'address 5: {card}' in out
+    # The VLT 6000 has no par. 520 (exception 00): probing it as a VLT 5000 found nothing.
+    assert f'address 6: {card}' in out
     assert 'address 20: mcd mcd500, state ready' in out
     assert 'address 21: mcd mcd3000, state ready' in out
-    assert '4 device(s) found at addresses 1-22' in out
+    assert '5 device(s) found at addresses 1-22' in out
+    assert not writes_to(line, 5) and not writes_to(line, 6)  # a scan only reads
+
+
+def test_scan_takes_the_bus_from_a_parameters_file(line, tmp_path):
+    code, out = run('scan', '--config', params_file(tmp_path, line), '--addresses', '1-1',
+                    '--quiet')
+    assert code == 0 and out == 'address 1: fc fc51, state ready\n1 device(s) found at ' \
+        'addresses 1-1\n'
+
+
+def test_scan_on_the_fc_protocol_tells_a_drive_that_does_not_tell_its_type():
+    server = make_fc_protocol_server({1: 'fc51', 2: 'vlt6000'})
+    port = f'socket://127.0.0.1:{server.open_tcp()}'
+    server.start()
+    try:
+        code, out = run('scan', '--port', port, '--protocol', 'fc_protocol', '--addresses',
+                        '1-3', '--timeout', 0.5, '--quiet')
+    finally:
+        server.stop()
+    assert code == 0 and out.splitlines() == [
+        'address 1: fc fc51, state ready',
+        'address 2: a drive that does not tell its FC type (par. 15-40 not readable): a VLT '
+        '5000/6000? set family vlt with model vlt5000 or vlt6000, state ready',
+        '2 device(s) found at addresses 1-3']
+
+
+def test_the_simulated_vlt6000_refuses_par_520_as_a_real_one_did(line):
+    code, _ = run('get', *bus(line), '--family', 'vlt', '--model', 'vlt6000', '--address', 6,
+                  520, '--type', 'uint32', '--conversion', -2)
+    assert code == 1
 
 
 def test_status_of_a_drive_and_of_a_starter(line):
@@ -47,26 +139,79 @@ def test_status_of_a_drive_and_of_a_starter(line):
 
 def test_get_and_set_with_conversion_and_units(line):
     code, out = run('get', *bus(line), '--family', 'fc', '--address', 1, '3-41')
-    assert code == 0 and '3-41 = 3.0' in out and 'Ramp 1 Ramp-up Time' in out
+    assert code == 0 and out.startswith('3-41 = 3.0 s  # Ramp 1 Ramp-up Time')
     code, out = run('set', *bus(line), '--family', 'fc', '--address', 1, '3-41', '4.25')
-    assert code == 0 and '3-41 = 4.25 (read back)' in out
-    assert line.devices[1].model.parameters[341] == 425  # raw value, conversion index -2
-    code, out = run('set', *bus(line), '--family', 'fc', '--address', 1, '3-41', '3')
-    assert code == 0
+    assert code == 0 and '3-41 = 4.25 s (written, read back)' in out
+    assert model(line, 1).parameters[341] == 425  # raw value, conversion index -2
 
 
-def test_backup_restore_round_trip_with_verify(line, tmp_path):
-    path = tmp_path / 'mcd500.yaml'
-    code, out = run('backup', *bus(line), '--family', 'mcd', '--address', 20, path)
-    assert code == 0 and 'parameters of mcd_20 saved' in out and 'verified' in out
-    saved = yaml.safe_load(path.read_text())
-    assert saved['model'] == 'mcd500' and len(saved['parameters']) == 591
-    original = saved['parameters'][4]
-    assert run('set', *bus(line), '--family', 'mcd', '--address', 20, 4, original + 5)[0] == 0
-    code, out = run('restore', *bus(line), '--family', 'mcd', '--address', 20, path)
-    assert code == 0 and '591 parameters restored to mcd_20 and verified' in out
-    assert run('get', *bus(line), '--family', 'mcd', '--address', 20, 4)[1].strip() == \
-        f'4 = {original}'
+def test_mcd_parameters_by_number_or_designation(line):
+    model(line, 20).parameters[4] = 350  # register 40012: parameter 4, 1-4 Current Limit
+    for number in ('4', '1-4'):
+        code, out = run('get', *bus(line), '--family', 'mcd', '--address', 20, number)
+        assert code == 0 and out.startswith('4 = 350 % FLC  # Current Limit'), out
+
+
+@pytest.mark.parametrize('options', [
+    ['--type', 'int16'], ['--type', 'text'], ['--conversion', '-2'], ['--index', '1'],
+])
+def test_mcd_options_that_do_not_apply_are_refused_in_words(line, capsys, options):
+    code, _ = run('get', *bus(line), '--family', 'mcd', '--address', 20, *options, 4)
+    assert code == 2
+    assert 'MCD parameters are raw 16-bit registers' in one_line(capsys)
+
+
+def test_mcd_type_uint16_is_what_it_is_anyway(line):
+    code, out = run('get', *bus(line), '--family', 'mcd', '--address', 20, '--type', 'uint16',
+                    '--conversion', 0, 4)
+    assert code == 0 and out.startswith('4 = ')
+
+
+@pytest.mark.parametrize('address', [1, 5, 6, 20, 21])
+@pytest.mark.parametrize('options', [
+    [], ['--type', 'uint16'], ['--type', 'text'], ['--type', 'int32', '--conversion', '-3'],
+    ['--index', '2'], ['--conversion', '74'],
+])
+@pytest.mark.parametrize('number', ['1', '3-41', '533', '16-14', '60'])
+def test_get_never_tracebacks(line, capsys, address, options, number):
+    family = {'fc51': 'fc', 'vlt5000': 'vlt', 'vlt6000': 'vlt'}.get(LINE[address], 'mcd')
+    device = ['--family', family, '--address', address, '--model', LINE[address]]
+    code, out = run('get', *bus(line), *device, *options, number)
+    error = capsys.readouterr().err
+    assert code in (0, 1, 2)
+    assert (code == 0) == bool(out) and (code == 0) != bool(error)
+    assert error.count('\n') <= 1 and 'Traceback' not in error
+
+
+def test_text_parameter_keeps_a_numeric_looking_value_as_text(line):
+    vlt6000 = ['--family', 'vlt', '--model', 'vlt6000', '--address', 6]
+    code, out = run('set', *bus(line), *vlt6000, 533, '1234567890')  # manual 003 example 6
+    assert code == 0 and '533 = "1234567890" (written, read back)' in out
+    assert model(line, 6).parameters[533] == '1234567890'
+    code, out = run('set', *bus(line), *vlt6000, '--type', 'text', 533, '0012')
+    assert code == 0 and model(line, 6).parameters[533] == '0012'
+    code, out = run('get', *bus(line), *vlt6000, 533)
+    assert code == 0 and out.startswith('533 = "0012"  # Display Text 1 (text)')
+
+
+def test_parameter_outside_the_table_with_type_and_conversion(line, capsys):
+    vlt5000 = ['--family', 'vlt', '--model', 'vlt5000', '--address', 5]
+    assert run('get', *bus(line), *vlt5000, 205)[0] == 2
+    assert 'give its data type' in one_line(capsys)
+    code, out = run('get', *bus(line), *vlt5000, 205, '--type', 'int32', '--conversion', -3)
+    assert code == 0 and out.startswith('205 = 50.0  # parameter 205 (int32, conversion')
+
+
+def test_exception_04_is_explained_with_register_7(line, capsys):
+    code, _ = run('set', *bus(line), '--family', 'fc', '--address', 1, '8-04', 9)
+    assert code == 1
+    error = one_line(capsys)
+    assert 'the data value exceeds the parameter limits (register 7 = 2)' in error
+    assert 'Modbus exception 04' in error and '8-04' in error
+    code, _ = run('get', *bus(line), '--family', 'fc', '--address', 1, '20-00', '--type',
+                  'uint16')
+    assert code == 1
+    assert 'the parameter number does not exist (register 7 = 0)' in one_line(capsys)
 
 
 def test_monitor_prints_a_line_per_poll(line):
@@ -75,24 +220,308 @@ def test_monitor_prints_a_line_per_poll(line):
     assert code == 0 and out.count('state: ready') == 3
 
 
+# -- writes: monitor only, --force, process data --------------------------------------------
+def test_set_to_a_monitor_only_device_is_refused_and_nothing_is_written(
+        line, tmp_path, capsys):
+    config = params_file(tmp_path, line, allow_control=False)
+    code, _ = run('set', '--config', config, '--device', 'feeder', '--quiet', '3-41', 5)
+    assert code == 2
+    error = one_line(capsys)
+    assert 'feeder is monitor only (allow_control: false)' in error and '--force' in error
+    assert model(line, 1).parameters[341] == 300 and not writes_to(line, 1)
+
+
+def test_force_writes_to_a_monitor_only_device_with_a_warning_naming_it(
+        line, tmp_path, capsys):
+    config = params_file(tmp_path, line, allow_control=False)
+    code, out = run('set', '--config', config, '--device', 'feeder', '--quiet', '--force',
+                    '3-41', 5)
+    error = capsys.readouterr().err
+    assert code == 0 and '3-41 = 5.0 s (written, read back)' in out
+    assert re.fullmatch(r'drive-bridge: WARNING: feeder is configured allow_control: false '
+                        r'.*--force writes to it for this command only\n', error), error
+    assert model(line, 1).parameters[341] == 500
+    assert not model(line, 1).control_words_received  # a parameter write, no control word
+
+
+@pytest.mark.parametrize('number', [5000, 5001, 5020, 5021])
+def test_process_data_registers_are_refused_and_nothing_is_written(line, tmp_path, capsys,
+                                                                   number):
+    # The report: "set --device feeder 5000 1148 --type uint16 --conversion 0" wrote the
+    # FC 51's control word (register 50000 = 10 * 5000) and started the drive.
+    config = params_file(tmp_path, line)
+    code, _ = run('set', '--config', config, '--device', 'feeder', '--quiet', number, 1148,
+                  '--type', 'uint16', '--conversion', 0)
+    assert code == 2
+    assert 'carries process data or control' in one_line(capsys)
+    drive = model(line, 1)
+    assert not writes_to(line, 1) and not drive.control_words_received
+    assert drive.control_word == 0 and drive.reference_word == 0
+    drive.advance(time.monotonic() + 1.0)
+    assert drive.output_pct == 0.0 and not drive.run_requested()
+
+
+# -- backup and restore ---------------------------------------------------------------------
+def backup(line, tmp_path, device, name='backup.yaml'):
+    path = tmp_path / name
+    code, out = run('backup', *bus(line), *device, path)
+    assert code == 0, out
+    return path
+
+
+def test_backup_file_names_device_model_address_date_and_each_parameter(line, tmp_path):
+    before = datetime.datetime.now().astimezone().replace(microsecond=0)
+    saved = yaml.safe_load(backup(line, tmp_path, FC51).read_text())
+    assert (saved['format'], saved['device'], saved['family'], saved['model'],
+            saved['address']) == (2, 'fc_1', 'fc', 'fc51', 1)
+    assert datetime.datetime.fromisoformat(saved['date']) >= before
+    ramp = next(entry for entry in saved['parameters'] if entry['pnu'] == 341)
+    assert ramp == {'number': '3-41', 'pnu': 341, 'name': 'Ramp 1 Ramp-up Time', 'unit': 's',
+                    'value': model(line, 1).parameters[341] / 100}
+    assert all(set(entry) == {'number', 'pnu', 'name', 'unit', 'value'}
+               for entry in saved['parameters'])
+
+
+def test_backup_restore_round_trip_with_verify(line, tmp_path):
+    path = backup(line, tmp_path, MCD500)
+    saved = yaml.safe_load(path.read_text())
+    assert saved['model'] == 'mcd500' and len(saved['parameters']) == 591
+    current_limit = saved['parameters'][3]
+    assert (current_limit['number'], current_limit['pnu']) == ('1-4', 4)
+    parameters = model(line, 20).parameters
+    parameters[4] += 5
+    code, out = run('restore', *bus(line), *MCD500, path)
+    assert code == 0 and '591 parameters restored to mcd500 mcd_20 and verified' in out
+    assert parameters[4] == current_limit['value']
+
+
+def test_drive_round_trip_with_a_text_parameter(line, tmp_path):
+    vlt6000 = ['--family', 'vlt', '--model', 'vlt6000', '--address', 6]
+    assert run('set', *bus(line), *vlt6000, 533, 'PUMP 7')[0] == 0
+    path = backup(line, tmp_path, vlt6000)
+    model(line, 6).parameters[533] = 'other'
+    model(line, 6).parameters[104] = 60
+    code, out = run('restore', *bus(line), *vlt6000, path)
+    assert code == 0 and 'restored to vlt6000 vlt_6 and verified' in out
+    assert model(line, 6).parameters[533] == 'PUMP 7' and model(line, 6).parameters[104] == 50
+
+
+def edited(path, edit):
+    content = yaml.safe_load(path.read_text())
+    edit(content)
+    path.write_text(yaml.safe_dump(content, sort_keys=False))
+    return path
+
+
+def entry(content, pnu):
+    return next(row for row in content['parameters'] if row['pnu'] == pnu)
+
+
+def set_value(pnu, value):
+    return lambda content: entry(content, pnu).update(value=value)
+
+
+@pytest.mark.parametrize('edit, message', [
+    (set_value(341, 5000.0), '3-41 (entry 12): Ramp 1 Ramp-up Time (par. 3-41): 5000.0 s is '
+     'above the maximum 3600 s'),
+    (set_value(129, 1), 'Automatic Motor Tuning (AMT) (par. 1-29): 1 is not an option'),
+    (set_value(124, 'fast'), 'Motor Current (par. 1-24) takes a number'),
+    (set_value(122, True), 'takes a number, not True'),
+    (lambda c: c['parameters'].append({'pnu': 9999, 'value': 1}), 'pnu 9999 is not a '
+     "parameter of this model's table"),
+    (lambda c: c['parameters'].append({'pnu': 1614, 'value': 1}), 'Motor Current is a '
+     'readout, not a setting'),
+    (lambda c: c['parameters'].append(dict(entry(c, 341), value=4.0)), 'pnu 341 is given '
+     'twice'),
+    (lambda c: entry(c, 341).update(number='3-42'), 'number 3-42 does not match pnu 341'),
+    (lambda c: entry(c, 341).update(unit='ms'), "unit 'ms' in the file, 's' in the table"),
+])
+def test_restore_checks_the_whole_file_first_and_writes_nothing(line, tmp_path, capsys, edit,
+                                                                message):
+    path = backup(line, tmp_path, FC51)
+    line.devices[1].model.parameters[342] = 999  # a change the restore would undo
+    path = edited(path, lambda content: (set_value(342, 3.0)(content), edit(content)))
+    before = dict(model(line, 1).parameters)
+    line.stats.frames.clear()
+    code, _ = run('restore', *bus(line), *FC51, path)
+    error = capsys.readouterr().err
+    assert code == 2 and message in error, error
+    assert error.startswith(f'drive-bridge: {path}: nothing written to fc_1')
+    assert model(line, 1).parameters == before and not writes_to(line, 1)
+
+
+@pytest.mark.parametrize('text, message', [
+    ('parameters:\n  True: 5\n', 'key True is not a parameter number (a boolean to YAML)'),
+    ('parameters:\n  341: 4.0\n  341: 5.0\n', 'key 341 is given twice (lines 4 and 5)'),
+    ('parameters:\n  1: 5\n  True: 4\n', 'key True is given twice'),
+    ("parameters:\n  '341': 4.0\n", "key '341' is not a parameter number (str)"),
+    ('parameters:\n- {pnu: 341, value: 4.0, colour: red}\n', 'unknown keys colour'),
+    ('parameters:\n- {pnu: 3-41, value: 4.0}\n', "pnu '3-41' is not a parameter number"),
+    ('parameters:\n- {number: 3-41, value: 4.0}\n', 'parameter entry 1 has no pnu'),
+    ('modle: fc51\nparameters: {341: 4.0}\n', 'unknown keys modle'),
+    ('format: 3\nparameters: {341: 4.0}\n', 'backup format 3 is not one'),
+    ('parameters: [\n', 'is not valid YAML'),
+    ('family: fc\n', 'is not a drive-bridge backup'),
+])
+def test_a_file_that_is_not_a_clean_backup_is_refused_in_one_line(
+        line, tmp_path, capsys, text, message):
+    path = tmp_path / 'bad.yaml'
+    path.write_text('family: fc\nmodel: fc51\n' + text if 'family' not in text else text)
+    code, _ = run('restore', *bus(line), *FC51, path)
+    assert code == 2 and message in one_line(capsys)
+    assert not writes_to(line, 1)
+
+
+def test_an_older_bare_number_backup_still_restores_with_the_same_checks(
+        line, tmp_path, capsys):
+    path = tmp_path / 'old.yaml'
+    path.write_text('device: fc_1\nfamily: fc\nmodel: fc51\naddress: 1\n'
+                    'parameters:\n  341: 4.5\n  342: 2.5\n')
+    code, out = run('restore', *bus(line), *FC51, path)
+    assert code == 0 and '2 parameters restored' in out
+    assert (model(line, 1).parameters[341], model(line, 1).parameters[342]) == (450, 250)
+    assert model(line, 1).eeprom_writes is False  # coil 65 = 0: RAM only
+    assert run('restore', *bus(line), *FC51, '--eeprom', path)[0] == 0
+    assert model(line, 1).eeprom_writes is True  # coil 65 = 1: RAM and EEPROM
+    path.write_text('family: fc\nmodel: fc51\nparameters:\n  341: 4.0\n  1614: 2\n')
+    assert run('restore', *bus(line), *FC51, path)[0] == 2
+    assert 'Motor Current is a readout' in capsys.readouterr().err
+    assert model(line, 1).parameters[341] == 450
+
+
+def test_a_backup_of_another_model_is_refused_even_with_force(line, tmp_path, capsys):
+    path = backup(line, tmp_path, ['--family', 'mcd', '--address', 21])  # an MCD 3000
+    before = dict(model(line, 20).parameters)
+    line.stats.frames.clear()
+    code, _ = run('restore', *bus(line), *MCD500, '--force', path)
+    error = capsys.readouterr().err
+    assert code == 2 and 'it is a backup of a mcd3000; this device is a mcd500' in error
+    assert model(line, 20).parameters == before and not writes_to(line, 20)
+
+
+def test_a_model_edited_into_a_backup_is_refused(line, tmp_path, capsys):
+    path = edited(backup(line, tmp_path, FC51), lambda content: content.update(model='fc302'))
+    code, _ = run('restore', *bus(line), *FC51, path)
+    assert code == 2
+    assert 'it is a backup of a fc302; this device is a fc51' in one_line(capsys)
+    assert not writes_to(line, 1)
+
+
+def test_a_backup_of_another_family_is_refused(line, tmp_path, capsys):
+    path = backup(line, tmp_path, ['--family', 'mcd', '--address', 21])
+    code, _ = run('restore', *bus(line), *FC51, path)
+    assert code == 2 and 'backup of a mcd device; this device is fc' in one_line(capsys)
+
+
+def test_a_backup_of_another_device_needs_force(line, tmp_path, capsys):
+    path = backup(line, tmp_path, FC51)  # device fc_1
+    config = params_file(tmp_path, line)
+    model(line, 1).parameters[341] = 999
+    code, _ = run('restore', '--config', config, '--device', 'feeder', '--quiet', path)
+    error = one_line(capsys)
+    assert code == 2 and "it is a backup of device 'fc_1', not 'feeder'" in error
+    assert '--force' in error and model(line, 1).parameters[341] == 999
+    code, out = run('restore', '--config', config, '--device', 'feeder', '--quiet', '--force',
+                    path)
+    error = capsys.readouterr().err
+    assert code == 0 and 'WARNING' in error and 'feeder' in error
+    assert model(line, 1).parameters[341] == 300
+
+
+def test_restore_to_a_monitor_only_device_needs_force(line, tmp_path, capsys):
+    config = params_file(tmp_path, line, allow_control=False)
+    path = backup(line, tmp_path, ['--config', config, '--device', 'feeder'])
+    parameters = model(line, 1).parameters
+    parameters[341] = 999
+    line.stats.frames.clear()
+    code, _ = run('restore', '--config', config, '--device', 'feeder', '--quiet', path)
+    assert code == 2 and 'feeder is monitor only' in one_line(capsys)
+    assert not writes_to(line, 1) and parameters[341] == 999
+    code, _ = run('restore', '--config', config, '--device', 'feeder', '--quiet', '--force',
+                  path)
+    assert code == 0 and 'WARNING: feeder is configured allow_control: false' in \
+        capsys.readouterr().err
+    assert parameters[341] == 300
+
+
+def test_ctrl_c_during_restore_exits_130_and_says_how_far_it_got(line, tmp_path, capsys,
+                                                                 monkeypatch):
+    path = backup(line, tmp_path, FC51)
+    content = yaml.safe_load(path.read_text())
+    pnus = [row['pnu'] for row in content['parameters']]
+    for row in content['parameters'][:6]:
+        model(line, 1).parameters[row['pnu']] = 77  # the first six differ from the file
+    real = TransactionRunner.transact
+    parameter_writes = []
+
+    def transact(self, device, request):
+        if type(request).__name__ in ('WriteRegister', 'WriteRegisters'):  # a parameter
+            if len(parameter_writes) == 4:
+                raise KeyboardInterrupt  # Ctrl-C while the fifth is about to go out
+            parameter_writes.append(request)
+        return real(self, device, request)
+
+    monkeypatch.setattr(TransactionRunner, 'transact', transact)
+    code, _ = run('restore', *bus(line), *FC51, path)
+    error = one_line(capsys)
+    assert code == 130
+    assert 'interrupted: 4 of 29 parameters were written (entries 1-4, 0-03 to 1-22)' in error
+    assert '1-23 (its write may or may not have reached the device) and the 24 after it ' \
+           'were not' in error
+    values = model(line, 1).parameters
+    assert all(values[pnu] != 77 for pnu in pnus[:4]) and values[pnus[4]] == 77
+
+
+def test_a_device_failure_during_restore_says_which_were_written(line, tmp_path, capsys):
+    path = backup(line, tmp_path, FC51)
+    rows = yaml.safe_load(path.read_text())['parameters']
+    model(line, 1).output_pct = 50.0  # running: 1-24 Motor Current may not change (17)
+    model(line, 1).control_word = 0x047C
+    code, _ = run('restore', *bus(line), *FC51, path)
+    error = one_line(capsys)
+    position = [row['pnu'] for row in rows].index(124)
+    assert code == 1 and 'not possible in the present mode' in error
+    assert f'{position} of 29 parameters were written (entries 1-{position},' in error
+    assert '1-24 and the' in error
+
+
+# -- parameters file ------------------------------------------------------------------------
 def test_config_file_names_the_bus_and_device(line, tmp_path):
-    params = tmp_path / 'line.yaml'
-    params.write_text(yaml.safe_dump({'/**/drive_bridge': {'ros__parameters': {
-        'port': line.pty_path, 'parity': 'N', 'devices': ['conv'],
-        'conv': {'family': 'fc', 'model': 'fc51', 'address': 1}}}}))
-    code, out = run('get', '--config', params, '--device', 'conv', '--quiet', '8-03')
+    code, out = run('get', '--config', params_file(tmp_path, line), '--device', 'feeder',
+                    '--quiet', '8-03')
     assert code == 0 and out.startswith('8-03 = ')
 
 
+def test_node_picks_the_block_of_a_file_with_two_nodes(line, tmp_path, capsys):
+    path = tmp_path / 'two.yaml'
+    block = {'port': line.pty_path, 'parity': 'N', 'timeout': 0.5, 'devices': ['conv']}
+    path.write_text(yaml.safe_dump({
+        'line1': {'drive_bridge': {'ros__parameters': dict(block, conv={
+            'family': 'fc', 'model': 'fc51', 'address': 1})}},
+        'line2': {'drive_bridge': {'ros__parameters': dict(block, conv={
+            'family': 'vlt', 'model': 'vlt6000', 'address': 6})}}}))
+    code, out = run('status', '--config', path, '--node', '/line2/drive_bridge', '--quiet')
+    assert code == 0 and out.startswith('conv: vlt vlt6000 at address 6')
+    code, out = run('status', '--config', path, '--node', '/line1/drive_bridge', '--quiet')
+    assert code == 0 and out.startswith('conv: fc fc51 at address 1')
+    assert run('status', '--config', path, '--quiet')[0] == 2
+    error = one_line(capsys)
+    assert 'has 2 blocks and no --node was given' in error and '/line2/drive_bridge' in error
+
+
+# -- bad input, exit status, help -----------------------------------------------------------
 @pytest.mark.parametrize('argv, code, message', [
     (['get', '--family', 'fc', '--address', 1, '3-4x'], 2, "parameter number '3-4x'"),
     (['get', '--family', 'fc', '--address', 1, '99-99'], 2, 'give its data type'),
     (['set', '--family', 'fc', '--address', 1, '3-41', 'fast'], 2, 'takes a number'),
     (['set', '--family', 'fc', '--address', 1, '3-41', '3.333'], 2, 'not a multiple of 0.01'),
+    (['set', '--family', 'fc', '--address', 1, '3-41', '0.01'], 2, 'below the minimum 0.05'),
+    (['set', '--family', 'mcd', '--address', 20, '4', '70000'], 2, 'out of range for uint16'),
+    (['set', '--family', 'mcd', '--address', 20, '4', '1', '--eeprom'], 2, 'do not apply'),
     (['scan', '--addresses', '40-2'], 2, 'must lie within 1-247, low to high'),
     (['status'], 2, 'name the device: --config FILE'),
     (['status', '--family', 'mcd', '--address', 150], 2, 'out of range for family mcd'),
-    (['status', '--family', 'fc', '--address', 9], 1, 'no reply within 0.1 s'),
+    (['status', '--family', 'fc', '--address', 9], 1, 'no reply within 0.5 s'),
     (['restore', '--family', 'fc', '--address', 1, '/nonexistent.yaml'], 2, 'cannot read'),
 ])
 def test_bad_arguments_get_one_clear_line(line, capsys, argv, code, message):
@@ -106,3 +535,127 @@ def test_bad_arguments_get_one_clear_line(line, capsys, argv, code, message):
 def test_missing_port_is_a_bus_failure(capsys):
     assert run('status', '--port', '/dev/ttyNOPE', '--family', 'fc', '--address', 1)[0] == 1
     assert 'bus offline: /dev/ttyNOPE not found' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('command', [None, 'scan', 'status', 'get', 'set', 'backup',
+                                     'restore', 'monitor'])
+def test_help_everywhere(capsys, command):
+    with pytest.raises(SystemExit) as exited:
+        main(([command] if command else []) + ['--help'])
+    assert exited.value.code == 0
+    text = capsys.readouterr().out
+    assert text.startswith(f'usage: drive-bridge {command or ""}'.rstrip())
+    assert 'example' in text and 'drive-bridge ' in text.split('example', 1)[1]
+    if command in ('set', 'restore'):
+        assert 'FC 51 and VLT 5000/6000: store the write in EEPROM' in text
+        assert '--force' in text
+    if command is None:
+        assert '130 interrupted' in text
+
+
+def test_the_node_prints_usage_for_help():
+    pytest.importorskip('rclpy')
+    done = subprocess.run([sys.executable, '-m', 'drive_bridge.ros.node', '--help'],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.startswith('usage: drive_bridge_node')
+    assert 'error' not in done.stderr.lower()
+
+
+# -- processes: Ctrl-C, progress on a terminal, exclusive ports -----------------------------
+def cli_process(*argv, **kwargs):
+    return subprocess.Popen([sys.executable, '-m', 'drive_bridge.tools.cli',
+                             *[str(arg) for arg in argv]], **kwargs)
+
+
+def test_a_second_opener_gets_one_line_naming_the_owner_and_ctrl_c_exits_130(line, capsys):
+    monitor = cli_process('monitor', *bus(line), *FC51, '--period', 0.05,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert 'state: ready' in monitor.stdout.readline()  # the port is open: it polled
+        code, _ = run('status', *bus(line), *FC51)
+        error = one_line(capsys)
+        assert code == 1
+        assert f'bus offline: {line.pty_path} is in use by pid {monitor.pid} (' in error
+        assert 'drive_bridge.tools.cli monitor' in error
+        monitor.send_signal(signal.SIGINT)
+        assert monitor.wait(timeout=30) == 130
+        assert monitor.stderr.read().strip() == 'drive-bridge: interrupted'
+    finally:
+        if monitor.poll() is None:
+            monitor.kill()
+            monitor.wait()
+    assert run('status', *bus(line), *FC51)[0] == 0  # free again
+
+
+def test_progress_goes_to_stderr_only_on_a_terminal(line, tmp_path):
+    path = tmp_path / 'b.yaml'
+    argv = ['backup', '--port', line.pty_path, '--parity', 'N', '--baudrate', 115200, *FC51,
+            path]
+    controller, terminal = pty.openpty()
+    fcntl.ioctl(terminal, termios.TIOCSWINSZ, struct.pack('HHHH', 24, 100, 0, 0))  # a size
+    try:
+        done = cli_process(*argv, stdout=subprocess.PIPE, stderr=terminal, text=True)
+        os.close(terminal)
+        drawn = b''
+        while True:
+            try:
+                chunk = os.read(controller, 4096)
+            except OSError:  # EIO: the terminal's last writer has gone
+                break
+            if not chunk:
+                break
+            drawn += chunk
+        out = done.stdout.read()
+        assert done.wait(timeout=60) == 0
+    finally:
+        os.close(controller)
+    assert out == f'29 parameters of fc_1 saved to {path} and verified\n'
+    assert b'reading' in drawn and b'/29 [' in drawn and b'verifying' in drawn
+    piped = cli_process(*argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    out, error = piped.communicate(timeout=60)
+    assert piped.returncode == 0 and error == '' and out.endswith('and verified\n')
+
+
+# -- the README's examples ------------------------------------------------------------------
+def readme_examples():
+    """Return (command line, expected output lines) of the README's drive-bridge block."""
+    with open(os.path.join(ROOT, 'README.md')) as stream:
+        text = stream.read()
+    section = text.split('### Commissioning from a terminal: `drive-bridge`', 1)[1]
+    block = section.split('```bash\n', 1)[1].split('```', 1)[0]
+    examples = []
+    for row in block.splitlines():
+        if row.startswith('drive-bridge '):
+            examples.append((row, []))
+        elif row.startswith('#   '):
+            examples[-1][1].append(row[len('#   '):])
+    return examples
+
+
+def test_every_readme_example_runs_as_written_against_the_simulator(tmp_path, monkeypatch):
+    examples = readme_examples()
+    assert {shlex.split(command)[1] for command, _ in examples} >= \
+        {'scan', 'status', 'get', 'set', 'backup', 'restore', 'monitor'}
+    server = make_sim_server(README_LINE)
+    port = f'socket://127.0.0.1:{server.open_tcp(framing="rtu")}'
+    server.start()
+    try:
+        (tmp_path / 'config').mkdir()
+        with open(os.path.join(ROOT, 'config', 'mixed_bus.yaml')) as stream:
+            (tmp_path / 'config' / 'mixed_bus.yaml').write_text(
+                stream.read().replace('/dev/ttyUSB0', port))
+        monkeypatch.chdir(tmp_path)
+        for command, expected in examples:
+            argv = shlex.split(command.replace('/dev/ttyUSB0', port), comments=True)[1:]
+            code, out = run(*argv, '--quiet')
+            assert code == 0, command
+            for wanted in expected:
+                assert wanted in out, f'{command}\n  printed:\n{out}\n  README: {wanted}'
+    finally:
+        server.stop()
+    assert model_of(server, 1).parameters[341] == 425
+    assert model_of(server, 6).parameters[533] == '1234567890'
+
+
+def model_of(server, unit):
+    return server.devices[unit].model
