@@ -327,7 +327,7 @@ def _check_unique_addresses(devices: List[DeviceConfig]) -> None:
 
 
 # -- parameters files ----------------------------------------------------------------------
-def _duplicate_key_loader():
+def duplicate_key_loader():
     """Return a YAML loader that refuses a key given twice in one mapping, with its lines."""
     import yaml
 
@@ -362,7 +362,7 @@ def load_params_file(path: str) -> Dict[str, Dict[str, Any]]:
     import yaml
     try:
         with open(path) as stream:
-            content = yaml.load(stream, Loader=_duplicate_key_loader())
+            content = yaml.load(stream, Loader=duplicate_key_loader())
     except OSError as error:
         raise ConfigError(f'cannot read the parameters file {path}: {error.strerror}') from None
     except ConfigError as error:

@@ -213,7 +213,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
             return
         for key, result in results.items():
             if isinstance(result, DeviceException):
-                self.identity[key] = f'not readable ({self.data.explain_exception(result.code)})'
+                self.identity[key] = f'not readable ({self.explain_exception(result.code)})'
             elif result is not None:
                 self.identity[key] = str(result)
         self._identified = True

@@ -100,7 +100,7 @@ def load(path: str) -> Backup:
     import yaml
     try:
         with open(path) as stream:
-            content = yaml.load(stream, Loader=cfg._duplicate_key_loader())
+            content = yaml.load(stream, Loader=cfg.duplicate_key_loader())
     except OSError as error:
         raise BackupError(f'cannot read {path}: {error.strerror}') from None
     except ConfigError as error:  # a key given twice

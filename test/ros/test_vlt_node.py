@@ -19,7 +19,8 @@ def test_vlt6000_start_speed_trip_reset_coast(tmp_path):
     drive = server.devices[1].model
     try:
         assert client.wait_state('fan', 'ready', 15.0)
-        assert drive.card_timeouts[0] == 100  # register 2 = 1.0 s in 10 ms units
+        # register 2 = 1.0 s in 10 ms units, written by the set-up writes after the first poll
+        assert client.spin_until(lambda: drive.card_timeouts[0] == 100)
         assert client.call('fan', 'start').success
         assert client.wait_state('fan', 'running')
         assert drive.reference_word == 0x1999
