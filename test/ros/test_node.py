@@ -165,7 +165,7 @@ def test_duplicate_keys_are_refused_with_their_lines(tmp_path):
 
 
 def assert_one_line_config_error(process, expected: str) -> None:
-    """The node exits 2 with exactly one line, the configuration error, and no traceback."""
+    """Check that the node exits 2 with one line, the configuration error, no traceback."""
     code = process.wait(timeout=20)
     stderr = node_output(process)
     assert code == 2, stderr
