@@ -228,7 +228,8 @@ def test_enabling_control_at_runtime_is_logged_shown_and_can_be_forbidden(tmp_pa
             assert client.spin_until(
                 lambda: client.diagnostics('main') is not None and 'allow_control_changed' in
                 {kv.key for kv in client.diagnostics('main').values})
-            assert 'control ENABLED at runtime' in node_output(client.process)
+            assert client.spin_until(
+                lambda: 'control ENABLED at runtime' in node_output(client.process))
         forbid = {'port': server.pty_path, 'parity': 'N', 'allow_runtime_control_enable': False}
         with running_node(tmp_path / 'q.yaml', forbid, devices, ready=['aux']) as client:
             result = client.set_parameter('aux.allow_control', True)
