@@ -85,7 +85,23 @@ REFERENCE_SETTINGS: Tuple[Setting, ...] = (
     Setting('reference_timeout', float, 0.0,
             'drives: seconds without a speed_reference message before a ramp stop; 0 = off',
             low=0.0, high=3600.0, runtime=True),
+    # ros2_control (~/joint_states, ~/joint_commands): see drive_bridge.ros.joints.
+    Setting('velocity_scale', float, 0.0,
+            'drives: rad/s of the joint at 100 % reference (negative: the joint turns the '
+            'other way); 0 = not a joint', low=-10000.0, high=10000.0),
+    Setting('joint_name', str, '',
+            'drives: the joint name on ~/joint_states and ~/joint_commands; empty = the device '
+            'name'),
+    Setting('command_mode', str, 'reference',
+            'drives: reference = joint commands set the speed reference only; auto_start = a '
+            'nonzero command also starts the stopped drive, a zero one held auto_stop_delay '
+            'stops it', choices=('reference', 'auto_start'), runtime=True),
+    Setting('auto_stop_delay', float, 1.0,
+            'drives: seconds a zero joint command is held before command_mode auto_start '
+            'ramp-stops the drive', low=0.0, high=3600.0, runtime=True),
 )
+JOINT_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_./-]*')
+MAX_JOINT_NAME = 128
 
 
 def device_settings(family: Family) -> Tuple[Setting, ...]:
@@ -187,6 +203,7 @@ def build_config(bus_values: Mapping[str, Any],
     options = {setting.name: bus[setting.name] for setting in spec.settings}
     _check_protocol_addresses(devices, spec, options)
     _check_unique_addresses(devices)
+    check_unique_joints(devices)
     link = LinkSettings(
         protocol=bus['protocol'], port=bus['port'], host=bus['host'],
         tcp_port=bus['tcp_port'], baudrate=bus['baudrate'], parity=bus['parity'],
@@ -285,6 +302,8 @@ def build_device(name: str, values: Mapping[str, Any], protocol: str) -> DeviceC
         raise ConfigError(f'parameter {name + ".speed_reference"!r} = '
                           f'{checked["speed_reference"]} is refused: a monitor-only drive '
                           '(allow_control false) takes no speed reference; set it to 0')
+    if family.reference:
+        _check_joint(name, checked)
     common = {setting.name for setting in COMMON_DEVICE_SETTINGS}
     device = DeviceConfig(
         name=name, family=family.name, model=checked['model'], address=checked['address'],
@@ -297,6 +316,44 @@ def build_device(name: str, values: Mapping[str, Any], protocol: str) -> DeviceC
     except ConfigError as error:
         raise ConfigError(f'device {name!r}: {error}') from None
     return device
+
+
+def _check_joint(name: str, checked: Mapping[str, Any]) -> None:
+    """Check a drive's joint settings (ros2_control): a valid name, auto_start only if usable."""
+    joint = checked['joint_name']
+    if joint and (not JOINT_NAME.fullmatch(joint) or len(joint) > MAX_JOINT_NAME):
+        raise ConfigError(f'parameter {name + ".joint_name"!r} = {joint!r} is invalid: use a '
+                          'letter or _ followed by letters, digits, _, -, . or /, at most '
+                          f'{MAX_JOINT_NAME} characters')
+    if checked['velocity_scale'] == 0.0:
+        for key, default in (('joint_name', ''), ('command_mode', 'reference')):
+            if checked[key] != default:
+                raise ConfigError(f'parameter {name + "." + key!r} = {checked[key]!r} applies '
+                                  f'to joints only: set {name}.velocity_scale (rad/s at 100 %) '
+                                  'too, or leave it out')
+    if checked['command_mode'] == 'auto_start' and not checked['allow_control']:
+        raise ConfigError(f'parameter {name + ".command_mode"!r} = \'auto_start\' is refused: '
+                          'a monitor-only drive (allow_control false) is never started; use '
+                          'reference')
+
+
+def joint_name_of(device: 'DeviceConfig') -> str:
+    """Return the joint name of a drive (its device name unless joint_name is set)."""
+    return device.option('joint_name') or device.name
+
+
+def check_unique_joints(devices: List['DeviceConfig']) -> None:
+    """Refuse two joints of one node with the same joint name."""
+    seen: Dict[str, str] = {}
+    for device in devices:
+        if not device.option('velocity_scale'):
+            continue
+        joint = joint_name_of(device)
+        other = seen.setdefault(joint, device.name)
+        if other != device.name:
+            raise ConfigError(f'parameter {device.name + ".joint_name"!r}: joint name {joint!r} '
+                              f'is also the joint of {other!r}: joint names must be unique '
+                              'across the node')
 
 
 def _check_protocol_addresses(devices: List[DeviceConfig], spec, options: Dict[str, Any]) \

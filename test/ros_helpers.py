@@ -147,10 +147,11 @@ class RosClient:
         return future.result()
 
     def set_parameter(self, name: str, value) -> 'SetParameters.Response':
-        """Set one parameter of the node (bool, float or int) and return the result."""
+        """Set one parameter of the node (bool, float, int or str) and return the result."""
         kinds = {bool: ('PARAMETER_BOOL', 'bool_value'),
                  float: ('PARAMETER_DOUBLE', 'double_value'),
-                 int: ('PARAMETER_INTEGER', 'integer_value')}
+                 int: ('PARAMETER_INTEGER', 'integer_value'),
+                 str: ('PARAMETER_STRING', 'string_value')}
         kind, field = kinds[type(value)]
         parameter = ParameterMsg(name=name, value=ParameterValue(
             type=getattr(ParameterType, kind), **{field: value}))

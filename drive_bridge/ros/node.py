@@ -28,6 +28,7 @@ from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusEvent, BusMaster
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError
 from drive_bridge.protocol.commands import Command
+from drive_bridge.ros import joints
 from drive_bridge.ros.diagnostics import diagnostic_status, status_name
 from drive_bridge.ros.publishers import DevicePublishers
 from drive_bridge.settings import check_value, Setting
@@ -96,6 +97,7 @@ class DriveBridgeNode(LifecycleNode):
         self.bus: Optional[BusMaster] = None
         self.active = False
         self._device_publishers: Dict[str, DevicePublishers] = {}
+        self._joints: Optional[joints.JointInterface] = None  # ros2_control: ros/joints.py
         self._entities: List[Tuple[Callable[[Any], bool], Any]] = []  # (destroy, entity)
         self._publishing = threading.Lock()
         self._pending: List[_PendingCall] = []
@@ -151,6 +153,9 @@ class DriveBridgeNode(LifecycleNode):
         self.bus.set_commands_enabled(False)
         for device in self.config.devices:
             self._create_device_interface(device.name)
+        with self._publishing:
+            self._joints = joints.attach(self, self.bus, self.config.devices,
+                                         lambda: self.active)
         self._entities.append((self.destroy_timer, self.create_timer(
             self.config.diagnostics_period_s, self._on_diagnostics_timer)))
         self.bus.start()
@@ -209,6 +214,9 @@ class DriveBridgeNode(LifecycleNode):
             for publishers in self._device_publishers.values():
                 publishers.destroy()
             self._device_publishers.clear()
+            if self._joints is not None:
+                self._joints.destroy()
+                self._joints = None
         for destroy, entity in self._entities:
             destroy(entity)
         self._entities.clear()
@@ -318,7 +326,11 @@ class DriveBridgeNode(LifecycleNode):
                 changes.setdefault(device, {})[name] = value
             enabling = [device for device, change in changes.items()
                         if change.get('allow_control') and not bus.snapshot(device).allow_control]
+            if self._joints is not None:
+                self._joints.bridge.check_settings(changes)
             bus.apply_settings(changes)
+            if self._joints is not None:
+                self._joints.bridge.apply_settings(changes)
         except (ConfigError, CommandRefused) as error:
             return SetParametersResult(successful=False, reason=str(error))
         for device in enabling:
@@ -451,6 +463,8 @@ class DriveBridgeNode(LifecycleNode):
                 return
             try:
                 self._publish_event(publishers, event)
+                if self._joints is not None:
+                    self._joints.bridge.on_bus_event(event)
             except Exception as error:  # noqa: B902 - a bug must not kill the bus thread
                 self.get_logger().error(f'cannot publish {event.kind} of {event.device}: '
                                         f'{type(error).__name__}: {error}')
@@ -495,6 +509,12 @@ class DriveBridgeNode(LifecycleNode):
             if name in self._runtime_changes:
                 status.values.append(KeyValue(key='allow_control_changed',
                                               value=self._runtime_changes[name]))
+        joint_interface = self._joints
+        if joint_interface is not None:
+            for status, name in zip(array.status, bus.device_names):
+                status.values.extend(joint_interface.bridge.device_values(name))
+            array.status.append(joint_interface.bridge.commands_status(
+                status_name(fqn, joints.COMMANDS_TOPIC)))
         return array
 
 
