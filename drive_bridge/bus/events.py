@@ -14,4 +14,4 @@ class BusEvent:
     kind: str  # 'reading', 'offline', 'online', 'error' (state unknown), 'notice' (a log line)
     reading: Optional[DeviceReading] = None
     message: str = ''
-    stamp_s: float = 0.0  # the bus clock when the reading's poll began
+    stamp_s: float = 0.0  # the bus clock when the reply carrying the process data arrived

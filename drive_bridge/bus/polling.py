@@ -62,7 +62,7 @@ class Poller:
             return
         if step is None:
             self.current = None
-            self._poll_succeeded(device, poll.reading, poll.started_s)
+            self._poll_succeeded(device, poll.reading, poll.started_s, poll.received_s)
             return
         try:
             result = self.runner.transact(device, step.request)
@@ -81,7 +81,7 @@ class Poller:
             return
         with self.lock:
             device.health.consecutive_failures = 0
-        poll.deliver(result)
+        poll.deliver(result, self.runner.last_end_s)
 
     def _step_failed(self, poll: PollRun, step, error: TransportError) -> None:
         device = poll.device
@@ -167,7 +167,7 @@ class Poller:
                 self.emit(BusEvent(device.name, 'error', message=str(error)))
 
     def _poll_succeeded(self, device: BusDevice, reading: DeviceReading,
-                        started_s: float) -> None:
+                        started_s: float, received_s: float) -> None:
         notices = []
         with self.lock:
             health = device.health
@@ -185,8 +185,8 @@ class Poller:
                 notices.append(device.owner.on_online(self.clock()))
             notices.append(device.owner.on_reading(reading, started_s))
             if came_online:
-                self.emit(BusEvent(device.name, 'online', reading=reading, stamp_s=started_s))
-            self.emit(BusEvent(device.name, 'reading', reading=reading, stamp_s=started_s))
+                self.emit(BusEvent(device.name, 'online', reading=reading, stamp_s=received_s))
+            self.emit(BusEvent(device.name, 'reading', reading=reading, stamp_s=received_s))
             for notice in notices:
                 if notice:
                     self.emit(BusEvent(device.name, 'notice', message=notice))

@@ -92,6 +92,7 @@ class PollRun:
         self._result: Any = None
         self._started = False
         self.reading: Optional[DeviceReading] = None
+        self.received_s = started_s  # when the reply stamping the reading arrived
 
     def next_step(self) -> Optional[PollStep]:
         """Return the step to send now (the same one while it is retried), or None when done."""
@@ -108,8 +109,10 @@ class PollRun:
         self.attempt = 0
         return self.step
 
-    def deliver(self, result: Any) -> None:
+    def deliver(self, result: Any, received_s: Optional[float] = None) -> None:
         """Hand the current step's result (or the error of an optional step) to the cycle."""
+        if received_s is not None and self.step is not None and self.step.stamps:
+            self.received_s = received_s
         self._result = result
         self.step = None
 

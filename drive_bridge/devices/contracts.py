@@ -83,11 +83,14 @@ class PollStep:
     ``optional``: a refusal by the device (and, for a write, any failure) is handed back to
     the cycle as the result (the error object) instead of failing the poll. ``retry``: the
     bus may repeat the request after a lost or garbled reply (reads; never a write).
+    ``stamps``: the reply carries the reading's process data (status, speed); the time it
+    was received stamps the reading (joint states).
     """
 
     request: Request
     optional: bool = False
     retry: bool = True
+    stamps: bool = False
 
 
 # A poll cycle: yields steps, receives each step's result, returns the reading.

@@ -375,7 +375,7 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
         if word is not None:
             yield PollStep(self.process_write(word, control.reference_word), optional=True,
                            retry=False)
-        coils = yield PollStep(ReadCoils(COIL_STATUS, PROCESS_COILS))
+        coils = yield PollStep(ReadCoils(COIL_STATUS, PROCESS_COILS), stamps=True)
         if not isinstance(coils, list) or len(coils) < PROCESS_COILS:
             raise ProtocolError('status coils 33-64 missing from the reply')
         status_word, actual_word = coils_to_words(coils[:PROCESS_COILS])

@@ -69,7 +69,8 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
         word = control_word_for(control.steady)  # built now: what is in force at this moment
         request = self._read_request(spec, IGNORED_CONTROL_WORD if word is None else word,
                                      control.reference_word)
-        reply = yield PollStep(request, optional=True)  # a refused read still has the status
+        reply = yield PollStep(request, optional=True,  # a refused read still has the status
+                               stamps=True)
         if isinstance(reply, DeviceException) and isinstance(reply.reply, FcTelegram):
             # An AK 7 reply: the drive refused the read, its process block is valid.
             self.take_readout_error(name, reply)

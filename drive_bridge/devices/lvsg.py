@@ -153,7 +153,8 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             yield PollStep(self.image_write(self.image), optional=True, retry=False)
         elif self.extended and control.writes_allowed:
             yield PollStep(self.request_write(), optional=True, retry=False)
-        registers = yield PollStep(ReadRegisters(self.input_register, self.input_registers))
+        registers = yield PollStep(ReadRegisters(self.input_register, self.input_registers),
+                                   stamps=True)
         if not isinstance(registers, list):
             raise ProtocolError('input image missing from the replies')
         status = lvsg.decode_status(registers_to_bytes(registers, self.input_bytes,

@@ -259,7 +259,8 @@ class McdProfile(DeviceProfile, ParameterAccess):
         first = REGISTER['starter_status']
         slow = self.slow_readouts.due() or self._product_registers is None
         last = LAST_STATUS_NUMBER if slow else REGISTER['motor_temperature'].number
-        registers = yield PollStep(ReadRegisters(first.address, last - first.number + 1))
+        registers = yield PollStep(ReadRegisters(first.address, last - first.number + 1),
+                                   stamps=True)
         return self.decode([registers])
 
     def decode(self, blocks: List[List[int]]) -> DeviceReading:

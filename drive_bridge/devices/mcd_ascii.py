@@ -43,7 +43,8 @@ class McdAsciiProfile(mcd.McdProfile):
         The trip code (C18) is asked for when the status shows a trip, and otherwise only
         when the slow readouts are due (each request is an exchange of its own).
         """
-        replies = {'status': (yield PollStep(AsciiRequest(*ap_ascii.REQUESTS['status'])))}
+        replies = {'status': (yield PollStep(AsciiRequest(*ap_ascii.REQUESTS['status']),
+                                             stamps=True))}
         if not isinstance(replies['status'], int):
             raise ProtocolError('no status in the reply')
         tripped = mcd.STATE_CODES.get(bits(replies['status'], 0, 3)) == 'tripped'

@@ -221,9 +221,10 @@ def test_enabling_control_at_runtime_is_logged_shown_and_can_be_forbidden(tmp_pa
     with serving(server):
         devices = {'main': {'family': 'mcd', 'address': 20, 'allow_control': False},
                    'aux': {'family': 'mcd', 'address': 21, 'allow_control': False}}
+        # in a namespace of its own: the module's node runs a 'main' in the root namespace
         with running_node(tmp_path / 'p.yaml', {'port': server.pty_path, 'parity': 'N',
                                                 'diagnostics_period': 0.2}, devices,
-                          ready=['main']) as client:
+                          ready=['main'], namespace='/runtime') as client:
             assert client.set_parameter('main.allow_control', True).successful
             assert client.spin_until(
                 lambda: client.diagnostics('main') is not None and 'allow_control_changed' in
@@ -231,7 +232,8 @@ def test_enabling_control_at_runtime_is_logged_shown_and_can_be_forbidden(tmp_pa
             assert client.spin_until(
                 lambda: 'control ENABLED at runtime' in node_output(client.process))
         forbid = {'port': server.pty_path, 'parity': 'N', 'allow_runtime_control_enable': False}
-        with running_node(tmp_path / 'q.yaml', forbid, devices, ready=['aux']) as client:
+        with running_node(tmp_path / 'q.yaml', forbid, devices, ready=['aux'],
+                          namespace='/runtime') as client:
             result = client.set_parameter('aux.allow_control', True)
             assert not result.successful
             assert 'allow_runtime_control_enable is false' in result.reason

@@ -268,3 +268,13 @@ def test_a_first_start_without_reply_is_followed_by_the_stop_word_never_a_second
     sent = control_words(drive)
     assert sent[0] == 0x047C and sent.count(0x047C) == 1
     assert len(sent) > 3 and set(sent[1:]) == {0x043C}
+
+
+def test_a_reading_is_stamped_when_the_reply_with_its_process_data_arrived():
+    bus, drive, clock, events = make_bus()
+    run_for(bus, clock, 0.5)
+    bus.submit_command('conv', 'start')
+    run_for(bus, clock, 0.5)
+    status_replies = [t + RTT_S for t, txn in drive.log if isinstance(txn, ReadCoils)]
+    stamps = [e.stamp_s for e in events if e.kind == 'reading']
+    assert stamps and set(stamps) <= set(status_replies)
