@@ -71,6 +71,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         self.request = lvsg.PARAMETER_PRODUCT
         self.values: Dict[int, int] = {}
         self.hazard = ''
+        self.last_state = ''  # the state last reported ('' before first contact)
         self.slow_readouts = slow_readouts or SlowReadouts(0.0)
         self._slow_turn = 0
 
@@ -97,6 +98,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         self.values.clear()
         self.request = lvsg.PARAMETER_PRODUCT
         self.hazard = ''
+        self.last_state = ''
 
     # -- the image --------------------------------------------------------------------------
     @staticmethod
@@ -144,14 +146,16 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         set restarts the motor): the image is written back with Fwd Run clear, the one write
         allowed before a command, or reported as a hazard when nothing may be written.
         """
-        if self.image is None:
+        first_contact = self.image is None
+        if first_contact:
             self._adopt((yield PollStep(ReadRegisters(self.output_register,
                                                       self.output_registers), optional=True)))
         steady = control.steady
         if steady is not None and control.writes_allowed:
             self.image = self.control_for(steady)
             yield PollStep(self.image_write(self.image), optional=True, retry=False)
-        elif self.extended and control.writes_allowed:
+        elif self.extended and control.writes_allowed and not first_contact:
+            # Not at first contact: a Fwd Run found in the gateway is dealt with first.
             yield PollStep(self.request_write(), optional=True, retry=False)
         registers = yield PollStep(ReadRegisters(self.input_register, self.input_registers),
                                    stamps=True)
@@ -276,20 +280,38 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         return reading
 
     def _state(self, status: lvsg.Status, state_byte: Optional[int]) -> str:
+        state = self._state_now(status, state_byte)
+        self.last_state = state
+        return state
+
+    def _state_now(self, status: lvsg.Status, state_byte: Optional[int]) -> str:
         known = lvsg.MCD200_STATES.get(state_byte & 0x0F) if state_byte is not None else None
         if status.fault:
             return 'tripped'
         if status.on and status.ramping:
             if known in ('starting', 'stopping'):
                 return known
-            # The basic module has no state byte: the Fwd Run the gateway holds tells a
-            # start ramp (set) from a stop ramp (clear).
-            return 'starting' if self.image is not None and self.image.fwd_run else 'stopping'
+            return self._ramp_direction()
         if status.on:
             return 'running'
         if status.ready:
             return 'ready'
         return known if known in ('restart_delay', 'unknown') else 'not_ready'
+
+    def _ramp_direction(self) -> str:
+        """
+        Tell a start ramp from a stop ramp without a state byte (the basic module).
+
+        By the state before the ramp (a starter that was not running is starting, whoever
+        started it); at first contact, by the Fwd Run the gateway holds.
+        """
+        if self.last_state in ('starting', 'stopping'):
+            return self.last_state
+        if self.last_state == 'running':
+            return 'stopping'
+        if self.last_state:
+            return 'starting'
+        return 'starting' if self.image is not None and self.image.fwd_run else 'stopping'
 
     @staticmethod
     def _status_word(status: lvsg.Status) -> int:

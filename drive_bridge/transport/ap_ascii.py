@@ -17,6 +17,8 @@ from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 import serial
 
+DRAIN_SILENCE_S = 0.02  # USB adapters deliver bytes in ~16 ms batches
+
 
 class Nak(BadFrame):
     """The slave answered NAK: it saw a bad LRC and did not act on the fragment."""
@@ -34,6 +36,7 @@ class ApAsciiTransport(SerialPortTransport):
         self.nak_retries = nak_retries
         self.address_lrc_includes_eot = address_lrc_includes_eot
         self.naks = 0  # NAKs seen (each one retried or reported)
+        self._reply_deadline = 0.0  # when the reply being read is late
 
     def execute(self, unit: int, transaction) -> Optional[int]:
         """Run one transaction; return the status byte or data value of a request."""
@@ -85,6 +88,9 @@ class ApAsciiTransport(SerialPortTransport):
             self._refused_or_bad(reply, what)
 
     def _refused_or_bad(self, reply: ap_ascii.Reply, what: str) -> None:
+        # A slave answers with one fragment and falls silent: drop whatever follows an
+        # unexpected answer, and a line that keeps talking is babbling (LineBabble).
+        self._drain(self._reply_deadline, DRAIN_SILENCE_S)
         if reply.kind == 'NAK':
             raise Nak(f'NAK to {what}: the device saw a bad LRC')
         if reply.kind == 'BEL':
@@ -94,7 +100,7 @@ class ApAsciiTransport(SerialPortTransport):
         raise BadFrame(f'unexpected {reply.kind} to {what}')
 
     def _receive(self) -> ap_ascii.Reply:
-        deadline = time.monotonic() + self.settings.timeout_s
+        deadline = self._reply_deadline = time.monotonic() + self.settings.timeout_s
         buffer = b''
         while True:
             reply = ap_ascii.decode_reply(buffer)

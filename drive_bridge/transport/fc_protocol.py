@@ -80,7 +80,7 @@ class FcProtocolTransport(SerialPortTransport):
         if self.settings.local_echo:
             echo = self._read(len(encoded), deadline)
             if echo != encoded:
-                self._drain(deadline)
+                self._drain(deadline, DRAIN_SILENCE_S)
                 raise BadFrame('the adapter did not echo the telegram (local_echo is set)')
         if telegram.address.broadcast:
             return None
@@ -96,7 +96,7 @@ class FcProtocolTransport(SerialPortTransport):
             if result.telegram is not None:
                 return result.telegram
             if result.error:
-                self._drain(deadline)
+                self._drain(deadline, DRAIN_SILENCE_S)
                 error_type = _INVALID_REPLY.get(result.error, BadFrame)
                 raise error_type(f'invalid reply ({result.reason}), {len(buffer)} bytes '
                                  'received')
@@ -107,14 +107,3 @@ class FcProtocolTransport(SerialPortTransport):
                                      f'{len(buffer) + result.missing} bytes within '
                                      f'{self.settings.timeout_s:g} s')
             wanted = result.missing
-
-    def _drain(self, deadline: float) -> None:
-        """Drop what still arrives after a bad reply: until a silence, never past the deadline."""
-        port = self._port
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return
-            port.timeout = min(DRAIN_SILENCE_S, remaining)
-            if not port.read(256):
-                return

@@ -10,15 +10,17 @@ bus owns the retry policy. Failures are raised as the typed errors of
 
 import inspect
 import logging
+import time
 from typing import List, Optional
 
-from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.errors import BadFrame, DeviceException, LineBabble, LinkDown, NoResponse
 from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import (  # noqa: F401 - LinkSettings, wire_time_s re-exported
     LinkSettings, open_hint, port_missing, wire_time_s)
 from drive_bridge.transport.port_owner import in_use_text, lock_holders
+from drive_bridge.transport.serial_port import PORT_ERRORS
 import pymodbus
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -39,6 +41,8 @@ _HAS_TRACE_PACKET = 'trace_packet' in inspect.signature(ModbusSerialClient.__ini
 _GATEWAY_EXCEPTIONS = {0x0A: 'gateway path unavailable', 0x0B: 'gateway target did not respond'}
 
 RECEIVE_POLL_INTERVAL_S = 0.0005
+BABBLE_WINDOWS = 4  # pauses after a bad reply, each one with bytes in it: babble
+BABBLE_WINDOW_S = 0.02  # longer than a USB adapter's ~16 ms batches
 
 
 class ModbusTransport(Transport):
@@ -212,12 +216,37 @@ class ModbusTransport(Transport):
             raise BadFrame(f'write reply {response.address}/{echoed} does not match '
                            f'{address}/{count}')
 
+    def _line_keeps_talking(self) -> bool:
+        """
+        Return whether bytes keep arriving on a serial line after a bad reply (babble).
+
+        A device answers once and falls silent; bytes in each of a few pauses after the
+        transaction ended mean something else is talking. What arrives is dropped.
+        """
+        port = getattr(self._client, 'socket', None) if self.settings.is_serial else None
+        if port is None:
+            return False
+        try:
+            for _ in range(BABBLE_WINDOWS):
+                port.reset_input_buffer()
+                time.sleep(BABBLE_WINDOW_S)
+                if not port.in_waiting:
+                    return False
+            port.reset_input_buffer()
+        except PORT_ERRORS:
+            return False
+        return True
+
     def _classify_io_error(self, text: str):
         if port_missing(self.settings):
             self.close()
             return LinkDown(f'bus offline: {self.settings.port} not found')
         timeout = f'{self.settings.timeout_s:g} s'
         if self._received or 'decode' in text.lower():
+            if self._line_keeps_talking():
+                return LineBabble(f'bus offline: {self.settings.describe()}: the line keeps '
+                                  'talking past a bad reply: another master or a faulty '
+                                  'device is sending')
             return BadFrame(f'invalid reply (CRC error, garbage or wrong address), '
                             f'{len(self._received)} bytes received')
         return NoResponse(f'no reply within {timeout}')

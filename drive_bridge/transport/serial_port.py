@@ -12,7 +12,7 @@ import select
 import time
 from typing import Callable
 
-from drive_bridge.errors import LinkDown
+from drive_bridge.errors import LineBabble, LinkDown
 from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import LinkSettings, open_hint, port_missing, URL_PREFIXES
 from drive_bridge.transport.port_owner import in_use_text
@@ -27,6 +27,7 @@ except ImportError:  # not POSIX
         """Placeholder where termios does not exist."""
 PORT_ERRORS = (serial.SerialException, OSError, TermiosError)
 EARLY_WAKE_S = 0.002  # how much before a reply's end a wait for it ends
+MIN_DRAIN_SILENCE_S = 0.005
 
 
 def exclusive_open(port: str) -> bool:
@@ -143,3 +144,27 @@ class SerialPortTransport(Transport):
                       deadline - time.monotonic())
         if pause_s > 0.0005:
             time.sleep(pause_s)
+
+    def _drain(self, deadline: float, silence_s: float) -> None:
+        """
+        Drop what still arrives after a bad reply, until ``silence_s`` of silence.
+
+        Bounded by the transaction's deadline (at least a few silences from now): a line
+        that is still talking then is babbling (another master, or a faulty device), a link
+        fault of its own kind rather than one more bad reply.
+        """
+        silence_s = max(MIN_DRAIN_SILENCE_S, silence_s)
+        limit = max(deadline, time.monotonic() + 4 * silence_s)
+        dropped = 0
+        while True:
+            # A full silence each time (never cut short by the limit, which would take a
+            # late wait for a pause): bounded by the limit plus one silence.
+            chunk = self._read_some(256, silence_s)
+            if not chunk:
+                return
+            dropped += len(chunk)
+            if time.monotonic() >= limit:
+                raise LineBabble(f'bus offline: {self.settings.describe()}: the line keeps '
+                                 f'talking ({dropped} bytes past a bad reply, no pause within '
+                                 f'the {self.settings.timeout_s:g} s transaction): another '
+                                 'master or a faulty device is sending')

@@ -14,7 +14,7 @@ import time
 from typing import Any
 
 from drive_bridge.errors import (
-    BadFrame, CrcError, DeviceException, LineBabble, NoResponse, TruncatedFrame, WrongAddress)
+    BadFrame, CrcError, DeviceException, NoResponse, TruncatedFrame, WrongAddress)
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ModbusRequest
 from drive_bridge.protocol.rtu import RtuFrame
@@ -72,7 +72,7 @@ class RtuSerialTransport(SerialPortTransport):
             if result.frame is not None:
                 return result.frame
             if result.error:
-                self._drain(deadline)
+                self._drain(deadline, self._silence_s)
                 error_type = _INVALID_REPLY.get(result.error_kind, BadFrame)
                 raise error_type(f'invalid reply ({result.error}), {len(buffer)} bytes '
                                  'received')
@@ -87,25 +87,8 @@ class RtuSerialTransport(SerialPortTransport):
         return rtu.character_time_s(self.settings.baudrate, self.settings.effective_parity,
                                     self.settings.effective_stopbits)
 
-    def _drain(self, deadline: float) -> None:
-        """
-        Drop what still arrives after a bad reply, until one character-gap of silence.
-
-        Bounded by the transaction's deadline (at least a few gaps from now): a line that is
-        still talking then is babbling (another master, or a faulty device), a link fault.
-        """
-        gap = max(0.005, rtu.frame_gap_s(self.settings.baudrate, self.settings.parity,
-                                         self.settings.effective_stopbits))
-        limit = max(deadline, time.monotonic() + 4 * gap)
-        dropped = 0
-        while True:
-            remaining = limit - time.monotonic()
-            if remaining <= 0:
-                raise LineBabble(f'bus offline: {self.settings.describe()}: the line keeps '
-                                 f'talking ({dropped} bytes past a bad reply, no pause within '
-                                 f'the {self.settings.timeout_s:g} s transaction): another '
-                                 'master or a faulty device is sending')
-            chunk = self._read_some(256, min(gap, remaining))
-            if not chunk:
-                return
-            dropped += len(chunk)
+    @functools.cached_property
+    def _silence_s(self) -> float:
+        """Return the pause that ends a frame (3.5 characters)."""
+        return rtu.frame_gap_s(self.settings.baudrate, self.settings.parity,
+                               self.settings.effective_stopbits)

@@ -89,8 +89,8 @@ def written_control(request):
 def test_first_poll_reads_the_output_image_back_then_cycles_parameters():
     profile = LvsgProfile('auto', input_register=0, output_register=100)
     items, _ = poll(profile, answer(0, 0))
-    assert items == [('output', ReadRegisters(100, 2)), ('write', WriteRegister(101, 1 << 8)),
-                     ('input', ReadRegisters(0, 3))]
+    # First contact: no write before the image read back was judged (a Fwd Run in it).
+    assert items == [('output', ReadRegisters(100, 2)), ('input', ReadRegisters(0, 3))]
     values = {1: (4 << 3) << 8 | 3, 2: 255 << 8 | 1, 3: 2222, 4: 111}
     for parameter in (1, 2, 3, 4):
         items, reading = poll(profile, answer(parameter, values[parameter]))
@@ -110,7 +110,7 @@ def test_monitor_only_writes_nothing_not_even_the_parameter_request():
 def test_a_fwd_run_left_in_the_gateway_for_a_stopped_starter_is_written_back_clear():
     profile = LvsgProfile('mcd202', input_register=0, output_register=100)
     items, reading = poll(profile, answer(0, 0), output_bytes=bytes([1, 0x10, 0]))
-    assert [key for key, _ in items] == ['output', 'write', 'input', 'write']
+    assert [key for key, _ in items] == ['output', 'input', 'write']  # the clear first
     cleared = written_control(items[-1][1])
     assert not cleared.fwd_run and cleared.quick_stop  # only Fwd Run is cleared
     assert not reading.fault and profile.image.fwd_run is False
@@ -130,8 +130,10 @@ def test_a_fwd_run_left_in_the_gateway_is_a_hazard_when_nothing_may_be_written()
 def test_a_running_starter_keeps_the_fwd_run_it_has():
     running = LvsgProfile('mcd202', input_register=0, output_register=100)
     items, _ = poll(running, answer(0, 0, ready=False, on=True), output_bytes=bytes([1, 0, 0]))
-    assert [key for key, _ in items] == ['output', 'write', 'input']
-    assert items[1][1] == WriteRegister(101, 1 << 8)  # the request only, never the control
+    assert [key for key, _ in items] == ['output', 'input']
+    assert running.image.fwd_run is True
+    items, _ = poll(running, answer(0, 0, ready=False, on=True))
+    assert items[0] == ('write', WriteRegister(101, 1 << 8))  # the request, never the control
     assert running.image.fwd_run is True
 
 
@@ -185,12 +187,18 @@ def test_states_from_status_bits():
         _, reading = poll(profile, lvsg.encode_status(ready, on, fault, ramping, 0),
                           bytes(2))
         assert reading.state == state
-    _, reading = poll(profile, lvsg.encode_status(False, True, False, True, 40),
-                      control=FixedControl(Command.START))
+    # Without a state byte, a ramp's direction follows from the state before it.
+    ramp = lvsg.encode_status(False, True, False, True, 40)
+    _, reading = poll(profile, ramp, control=FixedControl(Command.START))
     assert reading.state == 'starting' and reading.details['motor_current_pct_flc'] == '127'
-    _, reading = poll(profile, lvsg.encode_status(False, True, False, True, 40),
-                      control=FixedControl(Command.STOP))
+    _, reading = poll(profile, lvsg.encode_status(False, True, False, False, 40))
+    assert reading.state == 'running'
+    _, reading = poll(profile, ramp, control=FixedControl(Command.STOP))
     assert reading.state == 'stopping'
+    _, reading = poll(profile, lvsg.encode_status(True, False, False, False, 0))
+    # Started from the starter's own inputs: Fwd Run clear, still a start ramp.
+    _, reading = poll(profile, ramp, control=FixedControl(Command.STOP))
+    assert reading.state == 'starting'
     _, reading = poll(profile, lvsg.encode_status(False, False, True, False, 0))
     assert reading.trip_name.startswith('tripped (trip code not known')
 
