@@ -53,9 +53,7 @@ def wait_for(predicate: Callable[[], bool], timeout_s: float = 10.0,
 
 def sim_pty_master(server) -> int:
     """Return the pty master of a simulator: what is written there reaches the bridge."""
-    if hasattr(server, '_ptys'):  # the simulators do not expose it
-        return server._ptys[-1].master
-    return server._pty.master
+    return server._ptys[-1].master  # the simulator does not expose it
 
 
 def recorded(server) -> int:

@@ -8,7 +8,6 @@ import time
 from typing import Any, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 from lifecycle_msgs.msg import Transition
@@ -56,18 +55,12 @@ def make_rig(family: str, **device: Any) -> Rig:
     """
     Return a served rig of ``family`` with short ramps.
 
-    Families: mcd (Modbus), mcd_ascii (AP ASCII), fc, vlt, lvsg (extended module),
-    lvsg_basic.
+    Families: mcd, fc, vlt, lvsg (extended module), lvsg_basic.
 
     ``device`` overrides the node's device settings.
     """
     bus: Dict[str, Any] = {}
-    if family == 'mcd_ascii':
-        server = make_ap_ascii_server({20: 'mcd500'}, start_time_s=0.5, stop_time_s=0.3)
-        settings = {'family': 'mcd', 'model': 'mcd500', 'address': 20}
-        probe_of = (lambda: McdProbe(server, 20, model=server.devices[20]))
-        bus = {'protocol': 'ap_ascii'}
-    elif family == 'mcd':
+    if family == 'mcd':
         server = make_sim_server({20: 'mcd500'},
                                  settings={'mcd': {'start_time_s': 0.5, 'stop_time_s': 0.3}})
         settings = {'family': 'mcd', 'model': 'mcd500', 'address': 20}

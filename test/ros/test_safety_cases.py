@@ -106,21 +106,25 @@ def more_diagnostics(client, count: int, timeout_s: float = 20.0) -> bool:
     return client.spin_until(lambda: len(client.messages['/diagnostics']) >= target, timeout_s)
 
 
-@pytest.mark.parametrize('line', ['native', 'pymodbus', 'ap_ascii'])
-def test_babbling_line_never_lets_a_failed_start_out_later(line, tmp_path):
-    """Case 1: starts asked for while a device babbles: none reaches the starter later."""
-    rig = make_rig('mcd_ascii' if line == 'ap_ascii' else 'mcd')
-    if line == 'pymodbus':
-        rig.bus['serial_engine'] = 'pymodbus'
+@pytest.mark.parametrize('engine', ['native', 'pymodbus'])
+def test_babbling_line_never_lets_a_failed_start_out_later(engine, tmp_path):
+    """
+    Case 1: starts asked for while a device babbles: none reaches the starter later.
+
+    Modbus RTU only: a babbler writing to the pty beside the AP ASCII simulator makes the
+    simulator's own writes fail now and then (EAGAIN: the kernel's pty buffer memory), and
+    its thread dies on that; the AP ASCII transport is tested on a babbling line in
+    test/integration/test_safety_bus.py.
+    """
+    rig = make_rig('mcd')
+    rig.bus['serial_engine'] = engine
     starts = spy_starts(rig.probe.model)
     calls = []  # (sent, answered, response), one call at a time
     with Session(rig, tmp_path / 'babble.yaml', timeout=0.3) as session:
         client = session.client
         assert client.wait_state(rig.name, 'ready', READY_S)
         since = len(client.messages['/diagnostics'])
-        # About 2 kB/s: a flood would fill the pty while the node is offline, and the AP
-        # ASCII simulator's thread dies on a full pty (an unhandled BlockingIOError).
-        with Babbler(sim_pty_master(rig.server), b'\xff\xff', period_s=0.002):
+        with Babbler(sim_pty_master(rig.server)):
             error = diagnostics_seen(client, rig.name, level_is(DiagnosticStatus.ERROR),
                                      15.0, since)
             assert error is not None, 'a babbling line is no ERROR in /diagnostics'
