@@ -26,17 +26,29 @@ def write_params(path, bus: Dict, devices: Dict[str, Dict]) -> str:
     return write_params_file(str(path), bus, devices)
 
 
-def start_node(params_file: str, namespace: str = '') -> subprocess.Popen:
-    """Start drive_bridge_node in a subprocess with the test environment."""
+def start_node(params_file: str, namespace: str = '',
+               restore_signals: bool = False) -> subprocess.Popen:
+    """
+    Start drive_bridge_node in a subprocess with the test environment.
+
+    ``restore_signals``: SIGINT and SIGTERM at their defaults in the child (a child of a
+    non-interactive shell's background job inherits SIGINT ignored).
+    """
     command = [sys.executable, '-m', 'drive_bridge.ros.node', '--ros-args',
                '--params-file', params_file]
     if namespace:
         command += ['-r', f'__ns:={namespace}']
     log = tempfile.NamedTemporaryFile('w+', prefix='drive_bridge_node_', suffix='.log')
     process = subprocess.Popen(command, env=dict(os.environ), stdout=log, stderr=log,
-                               text=True)
+                               text=True,
+                               preexec_fn=_default_signals if restore_signals else None)
     process.log = log  # a file, not a pipe: a full pipe would block the node's logging
     return process
+
+
+def _default_signals() -> None:
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, signal.SIG_DFL)
 
 
 def node_output(process: subprocess.Popen) -> str:
