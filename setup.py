@@ -32,7 +32,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'drive_bridge_node = drive_bridge.ros.node:main',
+            'drive_bridge_node = drive_bridge.ros.entry:main',
             'drive_bridge_sim = drive_bridge.sim.cli:main',
             'drive-bridge = drive_bridge.tools.cli:main',
             'drive_bridge_plot = drive_bridge.tools.plot_recording:main',

@@ -85,7 +85,7 @@ class NodeProcess:
         params = write_params_file(os.path.join(self.directory.name, 'bus.yaml'), bus, devices)
         self.log = open(os.path.join(self.directory.name, 'node.log'), 'w+')
         self.process = subprocess.Popen(
-            [sys.executable, '-m', 'drive_bridge.ros.node', '--ros-args', '--params-file',
+            [sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args', '--params-file',
              params], env=dict(os.environ), stdout=self.log, stderr=self.log, text=True)
 
     @property

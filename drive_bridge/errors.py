@@ -61,9 +61,11 @@ class LineBabble(LinkDown):
     kind = 'babble'
 
 
-# Every transaction failure kind, in the order /diagnostics lists them.
+# Every transaction failure kind, in the order /diagnostics lists them. ``late_reply``: a
+# whole reply to an earlier request that came after its transaction gave up, dropped by the
+# native RTU engine (the transaction it came into still succeeds): raise the timeout.
 FAILURE_KINDS = ('timeout', 'crc', 'wrong_address', 'truncated', 'bad_frame', 'exception',
-                 'nak', 'link', 'babble')
+                 'nak', 'link', 'babble', 'late_reply')
 
 
 class DeviceException(TransportError):

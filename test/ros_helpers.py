@@ -34,7 +34,7 @@ def start_node(params_file: str, namespace: str = '',
     ``restore_signals``: SIGINT and SIGTERM at their defaults in the child (a child of a
     non-interactive shell's background job inherits SIGINT ignored).
     """
-    command = [sys.executable, '-m', 'drive_bridge.ros.node', '--ros-args',
+    command = [sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args',
                '--params-file', params_file]
     if namespace:
         command += ['-r', f'__ns:={namespace}']

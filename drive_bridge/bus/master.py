@@ -317,13 +317,22 @@ class BusMaster:
         longer written.
         """
         with self._lock:
-            self._commands_enabled = False
-            for job in self._jobs.remove(keep=lambda job: job.urgent):
-                fail(job, CommandRefused(f'{reason}: {job.describe()} not sent'))
+            self._refuse_commands(reason)
             job = StopAllJob(None, self.clock() + timeout_s, reason=reason)
             self._jobs.push_front(job)
         self._wake.set()
         return job.future
+
+    def refuse_commands(self, reason: str) -> None:
+        """Take only stops from now on; drop waiting commands that are not stops, unsent."""
+        with self._lock:
+            self._refuse_commands(reason)
+
+    def _refuse_commands(self, reason: str) -> None:
+        self._commands_enabled = False
+        for job in self._jobs.remove(keep=lambda job: job.urgent):
+            fail(job, CommandRefused(f'{job.describe()} not sent: {reason} came first, and from '
+                                     'then on only stops are taken'))
 
     def stop_all(self, reason: str, timeout_s: float = 3.0) -> List[str]:
         """Stop every motor that may run because of the bridge and wait; see begin_stop_all."""
@@ -345,8 +354,25 @@ class BusMaster:
         return device
 
     def _enqueue(self, job: Job) -> None:
+        if isinstance(job, CommandJob) and job.command.stops:
+            self._drop_starts_overtaken_by(job)
         self._jobs.push(job)
         self._wake.set()
+
+    def _drop_starts_overtaken_by(self, stop: CommandJob) -> None:
+        """
+        Answer a device's waiting starts as not sent when a stop for it comes.
+
+        Stops go before other jobs: a start queued before the stop would otherwise go out
+        after it and run the motor that the later stop was meant to stop.
+        """
+        def overtaken(job: Job) -> bool:
+            return isinstance(job, CommandJob) and job.device is stop.device and \
+                job.command.may_start
+
+        for job in self._jobs.remove(keep=lambda job: not overtaken(job)):
+            fail(job, CommandRefused(f'{job.describe()} not sent: a {stop.describe()} for '
+                                     f'{stop.device.name} came after it'))
 
     # -- thread -------------------------------------------------------------------------
     def start(self) -> 'BusMaster':

@@ -139,7 +139,7 @@ class MotorOwner(ControlView):
         self.in_flight = command
         if command.may_start:
             self.motion = Motion.MAY_RUN
-            self.note = 'start on the wire'
+            self.note = ''  # describe() says the start was sent and is not answered yet
         elif self.cyclic:
             self._steady = self._stop_after(command)
 
@@ -183,10 +183,10 @@ class MotorOwner(ControlView):
         self.unsure_since_s = now_s
         if command.may_start:
             self.motion = Motion.MAY_RUN
-            self.note = 'start not acknowledged: the motor may be running'
+            self.note = 'start not acknowledged'
             if self.cyclic:
                 self._steady = Command.STOP
-                self.note += '; the cyclic image carries a stop'
+                self.note += '; a stop is written every poll from now on'
         elif (command.stops or self.cyclic) and motion_before.may_be_running:
             self.motion = Motion.MAY_RUN
             self.note = f'{command.value} not acknowledged: the motor may still be running'
@@ -210,7 +210,8 @@ class MotorOwner(ControlView):
         notice = None
         if self._steady is Command.START:
             self._steady = Command.STOP
-            notice = 'tripped: the run command is ended; the cyclic image carries a stop'
+            notice = 'tripped: the run command is ended; a stop is written every poll, so a ' \
+                'reset does not restart the motor'
         if self.motion.may_be_running:
             self.motion = Motion.IDLE
             self.note = 'tripped: the run ended'
@@ -230,8 +231,8 @@ class MotorOwner(ControlView):
                 self._steady = Command.STOP
             self.motion = Motion.MAY_RUN
             self.unsure_since_s = now_s
-            self.note = 'went offline while the bridge held a run command: the stop image ' \
-                'goes out when it answers again; start it again'
+            self.note = 'went offline while the bridge held a run command: it gets a stop ' \
+                'as soon as it answers again; start it again when needed'
             self._lost_run = True
 
     def on_online(self, now_s: float) -> Optional[str]:
@@ -239,8 +240,8 @@ class MotorOwner(ControlView):
         if not self._lost_run:
             return None
         self._lost_run = False
-        return 'back online after an outage while a run was held: the stop image was ' \
-            'written, the run is not resumed; start it again'
+        return 'back online after an outage while a run was held: a stop was written, the ' \
+            'run is not resumed; start it again when needed'
 
     def release(self, reason: str, now_s: float) -> None:
         """Stop carrying any image (stop_on_shutdown false at deactivate): nothing written."""
@@ -260,6 +261,6 @@ class MotorOwner(ControlView):
         }
         text = texts[self.motion]
         if self.in_flight is not None:
-            text += f'; {self.in_flight.value} on the wire'
+            text += f'; {self.in_flight.value} sent, not answered yet'
         return f'{text} ({self.note})' if self.note and self.motion is not Motion.RUNNING \
             else text

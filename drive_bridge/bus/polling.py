@@ -134,7 +134,7 @@ class Poller:
             if health.online is False:
                 health.backoff(self.timing.backoff_initial_s, self.timing.backoff_max_s,
                                self.clock())
-                health.status_text = f'no reply since going offline: {error}'
+                health.status_text = f'no valid reply since going offline: {error}'
                 return
             health.status_text = f'poll failed ({health.consecutive_failures} failed '\
                 f'transactions in a row): {error}'

@@ -350,7 +350,11 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         elif command is Command.STOP:
             steps = [Control()]
         elif command is Command.QUICK_STOP:  # Quick Stop set before Fwd Run is cleared
-            steps = [Control(fwd_run=base.fwd_run, quick_stop=True), Control(quick_stop=True)]
+            # Fwd Run stays as it is in force (a rising Fwd Run would start the starter):
+            # the bus's run command if it has one, else the image read back.
+            fwd_run = control.steady is Command.START if control.steady is not None \
+                else base.fwd_run
+            steps = [Control(fwd_run=fwd_run, quick_stop=True), Control(quick_stop=True)]
         elif command is Command.RESET:  # a pulse on bit 3, with Fwd Run clear: never a restart
             steps = [Control(reset=True, quick_stop=base.quick_stop),
                      Control(quick_stop=base.quick_stop)]

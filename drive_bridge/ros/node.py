@@ -234,6 +234,13 @@ class DriveBridgeNode(LifecycleNode):
         """Stop every motor that may run because of this node, then close the bus."""
         self._close_bus()
 
+    def refuse_commands(self, reason: str) -> None:
+        """Take only stops from now on (an exit signal came); queued commands are dropped."""
+        self.active = False
+        bus = self.bus
+        if bus is not None:
+            bus.refuse_commands(reason)
+
     # -- configuration ------------------------------------------------------------------
     def _load_config(self) -> cfg.BridgeConfig:
         protocol = self._declare(cfg.BUS_SETTINGS[0], 'protocol')
@@ -545,13 +552,32 @@ def _spin(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
                   flush=True)
 
 
+# Exit signals that reached a thread which did not block them (a thread started before
+# main() blocked them, when the node runs as ``python -m drive_bridge.ros.node`` rather than
+# through drive_bridge.ros.entry): Python runs the handler below in the main thread.
+_stray_signals: List[int] = []
+
+
+def _take_stray_signal(number: int, _frame) -> None:
+    """Record an exit signal that a thread without the mask took; never raise."""
+    if _stray_signals:
+        _say_again(number)
+    _stray_signals.append(number)
+
+
+def _say_again(number: int) -> None:
+    print(f'[drive_bridge] {signal.Signals(number).name} again: already stopping the '
+          'motors, then exiting', file=sys.stderr, flush=True)
+
+
 def _wait_for_signal(stop: threading.Event) -> int:
     """Wait in the main thread for an exit signal (they are blocked); return its number."""
-    while not stop.is_set():
+    while not stop.is_set() and not _stray_signals:
         received = signal.sigtimedwait(EXIT_SIGNALS, 0.5)
         if received is not None:
+            _stray_signals.append(received.si_signo)  # later ones are "again"
             return received.si_signo
-    return 0
+    return _stray_signals[0] if _stray_signals else 0
 
 
 def _ignore_more_signals(done: threading.Event) -> None:
@@ -559,8 +585,14 @@ def _ignore_more_signals(done: threading.Event) -> None:
     while not done.is_set():
         received = signal.sigtimedwait(EXIT_SIGNALS, 0.2)
         if received is not None:
-            print(f'[drive_bridge] {signal.Signals(received.si_signo).name} again: already '
-                  'stopping the motors, then exiting', file=sys.stderr, flush=True)
+            _say_again(received.si_signo)
+
+
+def _block_exit_signals() -> None:
+    """Block the exit signals here and in later threads; take strays from earlier ones."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, EXIT_SIGNALS)
+    for number in EXIT_SIGNALS:
+        signal.signal(number, _take_stray_signal)
 
 
 def main(args: Optional[List[str]] = None) -> int:
@@ -577,7 +609,7 @@ def main(args: Optional[List[str]] = None) -> int:
     # Block the exit signals in every thread from here on (threads inherit the mask): the
     # main thread takes them with sigtimedwait, so no KeyboardInterrupt ever lands inside a
     # stop, and a second signal cannot cut the stops short.
-    signal.pthread_sigmask(signal.SIG_BLOCK, EXIT_SIGNALS)
+    _block_exit_signals()
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as error:  # noqa: B902 - rcl refuses its arguments: say why in one line
@@ -599,8 +631,10 @@ def main(args: Optional[List[str]] = None) -> int:
                                    daemon=True)
         spinner.start()
         received = _wait_for_signal(stop)
-        node.get_logger().info(f'{signal.Signals(received).name}: stopping the motors that '
-                               'may run because of this node, then exiting')
+        signal_name = signal.Signals(received).name
+        node.refuse_commands(signal_name)
+        node.get_logger().info(f'{signal_name}: stopping the motors that may run because of '
+                               'this node, then exiting')
     except ConfigError as error:
         print(f'[drive_bridge] configuration error: {error}', file=sys.stderr, flush=True)
         exit_code = 2

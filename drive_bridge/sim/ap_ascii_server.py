@@ -115,7 +115,18 @@ class ApAsciiSimServer:
                     self.stats.fragments += 1
                     reply = self._answer(fragment)
                 if reply:
-                    os.write(self._master, reply)
+                    self._send(reply)
+
+    def _send(self, reply: bytes) -> None:
+        """Write a reply; wait while the pty is full (another writer on the line), never die."""
+        deadline = time.monotonic() + 1.0
+        while reply and time.monotonic() < deadline:
+            try:
+                reply = reply[os.write(self._master, reply):]
+            except BlockingIOError:
+                select.select([], [self._master], [], 0.05)
+            except OSError:
+                return  # the pty closed: the server is stopping
 
     def _answer(self, fragment: ap_ascii.Fragment) -> bytes:
         if fragment.kind == 'address':

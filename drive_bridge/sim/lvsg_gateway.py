@@ -188,12 +188,14 @@ class LvsgGatewaySim:
         slave, kind, offset = self._area(address, len(values))
         if kind != 'output':
             raise _Exception(ILLEGAL_ADDRESS)
-        if slave.clear_mode and self.modbus_watchdog_s:
-            slave.set_clear_mode(False, now_s)  # the Modbus side is back
         registers = bytes_to_registers(slave.control.encode(slave.extended), slave.byte_order)
         registers[offset:offset + len(values)] = values
         slave.write_output(registers_to_bytes(registers, slave.output_bytes, slave.byte_order),
                            now_s)
+        if slave.clear_mode and self.modbus_watchdog_s:
+            # The Modbus side is back: the DP master leaves Clear with the image just
+            # written, so only a Fwd Run in that image restarts the starter.
+            slave.set_clear_mode(False, now_s)
 
     def _watchdog(self, now_s: float) -> None:
         if not self.modbus_watchdog_s:

@@ -11,7 +11,7 @@ Failures are the typed errors of :mod:`drive_bridge.errors`.
 
 import functools
 import time
-from typing import Any
+from typing import Any, Tuple
 
 from drive_bridge.errors import (
     BadFrame, CrcError, DeviceException, NoResponse, TruncatedFrame, WrongAddress)
@@ -22,6 +22,7 @@ from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 
 
 _INVALID_REPLY = {'crc': CrcError, 'wrong_address': WrongAddress}
+_NOT_OURS = ('wrong_address', 'bad_frame')  # decode errors a late reply can cause
 
 
 class RtuSerialTransport(SerialPortTransport):
@@ -33,6 +34,7 @@ class RtuSerialTransport(SerialPortTransport):
         if not isinstance(request, ModbusRequest):
             raise TypeError(f'unsupported request {request!r}')
         frame = request.frame(unit)
+        self.last_recovered = {}
         try:
             reply = self._exchange(request, frame)
         except PORT_ERRORS as error:
@@ -71,6 +73,17 @@ class RtuSerialTransport(SerialPortTransport):
             result = rtu.decode_response(buffer, unit, function)
             if result.frame is not None:
                 return result.frame
+            if result.error_kind in _NOT_OURS:
+                skipped, buffer = self._skip_late_reply(buffer, deadline)
+                if skipped:
+                    if not buffer:
+                        buffer = self._read_some(1, deadline - time.monotonic())
+                    if not buffer:
+                        raise NoResponse(f'no reply within {self.settings.timeout_s:g} s '
+                                         '(a late reply to an earlier request came instead)')
+                    needed = rtu.MIN_RESPONSE_BYTES
+                    continue
+                result = rtu.decode_response(buffer, unit, function)
             if result.error:
                 self._drain(deadline, self._silence_s)
                 error_type = _INVALID_REPLY.get(result.error_kind, BadFrame)
@@ -81,6 +94,31 @@ class RtuSerialTransport(SerialPortTransport):
                                      f'within {self.settings.timeout_s:g} s')
             needed = result.needed
             self._await_bytes(needed - len(buffer), self._char_s, deadline)
+
+    def _skip_late_reply(self, buffer: bytes, deadline: float) -> Tuple[bool, bytes]:
+        """
+        Drop a whole, valid frame that is not the reply asked for.
+
+        Such a frame is a late reply to an earlier request (to this device or another) that
+        came after its own transaction gave up; the reply asked for may follow it.
+
+        Return (whether one was dropped, the bytes after it, or all bytes read if not).
+        """
+        while True:
+            length = rtu.response_length(buffer)
+            if length is None and len(buffer) >= 3:
+                return False, buffer  # no function a device answers with: garbage
+            wanted = (length or 3) - len(buffer)
+            if wanted <= 0:
+                break
+            chunk = self._read(wanted, deadline)
+            buffer += chunk
+            if len(chunk) < wanted:
+                return False, buffer
+        if not rtu.crc_ok(buffer[:length]):
+            return False, buffer
+        self.last_recovered['late_reply'] = self.last_recovered.get('late_reply', 0) + 1
+        return True, buffer[length:]
 
     @functools.cached_property
     def _char_s(self) -> float:

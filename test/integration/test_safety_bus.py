@@ -97,20 +97,8 @@ def test_every_read_ends_at_the_transaction_deadline_on_a_babbling_line(kind, ba
     assert seconds[-1] < TIMEOUT_S + 5.0, f'a read was held {seconds[-1]:.2f} s'
 
 
-BABBLE_NOT_COUNTED = {
-    'pymodbus': 'serial_engine pymodbus: a babbling line is a BadFrame (kind bad_frame) after '
-                'the timeout, never LineBabble',
-    'ap_ascii': 'AP ASCII: the first babbled byte ends the exchange as BadFrame (or Nak); '
-                'there is no drain and no LineBabble',
-    'fc_protocol': 'FC protocol: FcProtocolTransport._drain returns quietly at the deadline '
-                   'and the reply is reported as BadFrame/CrcError, never LineBabble',
-}
-
-
 @pytest.mark.parametrize('babbling_line', ['ff'], indirect=True)
-@pytest.mark.parametrize('kind', [
-    pytest.param(kind, marks=pytest.mark.xfail(strict=True, reason=BABBLE_NOT_COUNTED[kind]))
-    if kind in BABBLE_NOT_COUNTED else kind for kind in TRANSPORTS])
+@pytest.mark.parametrize('kind', TRANSPORTS)
 def test_a_babbling_line_is_counted_as_babble(kind, babbling_line):
     """
     Case 1: a babbling line is a link fault of its own kind (errors_babble).

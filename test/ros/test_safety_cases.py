@@ -208,11 +208,7 @@ def leave_fwd_run(rig) -> None:
         rig.probe.slave.control = Control(fwd_run=True)
 
 
-@pytest.mark.parametrize('family', ['lvsg_basic', pytest.param('lvsg', marks=pytest.mark.xfail(
-    strict=True, reason='extended module: the first poll writes the parameter request '
-    '(register output+1, FC 06) before the image with Fwd Run clear; the gateway holds '
-    'Fwd Run through that first write (LvsgProfile.poll: request_write before '
-    '_clear_unasked_fwd_run)'))])
+@pytest.mark.parametrize('family', ['lvsg_basic', 'lvsg'])
 def test_fwd_run_left_in_the_gateway_is_cleared_before_anything_else(family, tmp_path):
     """Case 8: at first contact, Fwd Run is written back clear before any other write."""
     rig = make_rig(family)
@@ -273,10 +269,6 @@ def states_while(client, name: str, busy) -> list:
     return client.values(name, 'state')[first:]
 
 
-@pytest.mark.xfail(strict=True, reason='basic module: a starter started from its own inputs '
-                   '(on + ramping, Fwd Run clear in the gateway) is reported as stopping: '
-                   'LvsgProfile._state tells a start ramp from a stop ramp by the Fwd Run '
-                   'the gateway holds, not by the state before the ramp')
 def test_basic_module_never_says_stopping_for_a_starter_that_is_starting(tmp_path):
     """Case 8: basic module: a starter starting (through the node or locally) is not stopping."""
     rig = make_rig('lvsg_basic')

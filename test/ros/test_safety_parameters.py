@@ -22,12 +22,7 @@ def more_frames(rig, count: int, timeout_s: float = 20.0) -> bool:
 
 
 # -- case 5: runtime allow_control false on a running motor ---------------------------------
-@pytest.mark.parametrize('family', ['fc', pytest.param('mcd', marks=pytest.mark.xfail(
-    strict=True, reason='MCD (not cyclic): after start and stop were acknowledged, '
-    'allow_control false is still refused "while the bridge holds a run command ... (no run '
-    'command held (stop acknowledged)): stop motor first": MotorOwner.acknowledged(START) '
-    'sets _steady = START on a non-cyclic device and only sending() of a cyclic device '
-    'replaces it, so holds_run stays true for ever')), 'lvsg'])
+@pytest.mark.parametrize('family', ['fc', 'mcd', 'lvsg'])
 def test_monitor_only_refused_while_running_then_nothing_written(family, tmp_path):
     """Case 5: allow_control false refused while a run is held; after a stop, no writes."""
     rig = make_rig(family)

@@ -1,0 +1,82 @@
+"""The native RTU engine: a late reply to an earlier request before the reply asked for."""
+
+from drive_bridge.errors import FAILURE_KINDS, NoResponse, WrongAddress
+from drive_bridge.protocol import rtu
+from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
+from drive_bridge.transport.link import LinkSettings
+from drive_bridge.transport.serial_rtu import RtuSerialTransport
+from fakes import always_readable_fd
+import pytest
+
+
+class ScriptedPort:
+    """A serial port whose wire holds ``reply`` bytes (all there at once)."""
+
+    def __init__(self, reply: bytes):
+        self.reply = reply
+
+    def reset_input_buffer(self):
+        pass
+
+    def write(self, data):
+        return len(data)
+
+    def read(self, count):
+        chunk, self.reply = self.reply[:count], self.reply[count:]
+        return chunk
+
+    @property
+    def in_waiting(self):
+        return len(self.reply)
+
+    def fileno(self):
+        return always_readable_fd()
+
+    def close(self):
+        pass
+
+
+def transport_with(reply: bytes) -> RtuSerialTransport:
+    transport = RtuSerialTransport(LinkSettings(port='/dev/null', timeout_s=0.05))
+    transport._port = ScriptedPort(reply)
+    return transport
+
+
+def registers_reply(unit: int, values) -> bytes:
+    data = bytes([2 * len(values)]) + b''.join(v.to_bytes(2, 'big') for v in values)
+    return rtu.RtuFrame(unit, 3, data).encode()
+
+
+LATE_FROM_ANOTHER_DEVICE = registers_reply(21, [7, 8, 9])
+LATE_POLL_OF_THIS_DEVICE = registers_reply(20, [1, 2, 3, 4])
+WRITE_ECHO = rtu.write_register_request(20, 1, 1).encode()
+
+
+@pytest.mark.parametrize('late', [LATE_FROM_ANOTHER_DEVICE, LATE_POLL_OF_THIS_DEVICE])
+def test_a_late_reply_before_the_reply_asked_for_is_dropped_and_counted(late):
+    transport = transport_with(late + WRITE_ECHO)
+    assert transport.execute(20, WriteRegister(1, 1)) is None
+    assert transport.last_recovered == {'late_reply': 1}
+    assert 'late_reply' in FAILURE_KINDS  # /diagnostics lists it as errors_late_reply
+
+
+def test_a_late_reply_and_nothing_after_it_is_no_response():
+    transport = transport_with(LATE_FROM_ANOTHER_DEVICE)
+    with pytest.raises(NoResponse, match='late reply'):
+        transport.execute(20, ReadRegisters(0, 3))
+
+
+def test_a_frame_from_another_address_with_a_bad_crc_is_a_wrong_address():
+    corrupted = LATE_FROM_ANOTHER_DEVICE[:-1] + bytes([LATE_FROM_ANOTHER_DEVICE[-1] ^ 0xFF])
+    transport = transport_with(corrupted)
+    with pytest.raises(WrongAddress):
+        transport.execute(20, ReadRegisters(0, 3))
+    assert transport.last_recovered == {}
+
+
+def test_the_counter_starts_again_with_each_transaction():
+    transport = transport_with(LATE_FROM_ANOTHER_DEVICE + registers_reply(20, [5, 6, 7]))
+    assert transport.execute(20, ReadRegisters(0, 3)) == [5, 6, 7]
+    transport._port = ScriptedPort(registers_reply(20, [5, 6, 7]))
+    assert transport.execute(20, ReadRegisters(0, 3)) == [5, 6, 7]
+    assert transport.last_recovered == {}
