@@ -434,7 +434,7 @@ class Oracle:
     def _spent(start: _Start, seq: int) -> bool:
         """Return whether a start can explain nothing after ``seq`` (``latest`` keeps it)."""
         request = start.request
-        window_passed = request.answered_seq is not None and request.answered_seq <= seq
+        window_passed = request.answered_seq is not None and request.answered_seq < seq
         return bool(start.ended) and (start.own_seq is not None or window_passed or
                                       request.outcome not in MAY_HAVE_RUN)
 
@@ -444,9 +444,19 @@ class Oracle:
             return False
         if request.answered_seq is None:
             return True
-        if self.exact:
-            return seq == request.answered_seq  # the line's last request at the answer
+        if self.exact:  # the line's last request at the answer; or, for a lost reply, the
+            # next one if the simulator took the write only after the master gave up (a
+            # starved simulator thread on a loaded machine)
+            if seq == request.answered_seq:
+                return True
+            return request.outcome == UNACKNOWLEDGED and seq == request.answered_seq + 1 \
+                and not self._device_frame(request, request.answered_seq)
         return seq <= request.answered_seq
+
+    def _device_frame(self, request: Request, seq: int) -> bool:
+        """Return whether line frame ``seq`` went to the device of ``request``."""
+        return 0 < seq <= len(self.frames) and \
+            self.frames[seq - 1].unit == self.devices[request.device].unit
 
     def _may_keep(self, start: _Start, seq: int) -> bool:
         """Return whether the start keeps a run image at frame ``seq`` (keepalive)."""
