@@ -6,6 +6,8 @@ drive_bridge_node on the soak line with 10 % faults, outages and trips, random s
 the client's record.
 
 Run: .venv/bin/python bench/soak_node.py [duration s] [seed] [fault rate] [timeout s]
+[broken variant]; a broken variant (:mod:`drive_bridge.tools.soak_broken`) runs the node with
+that safety rule broken on purpose, and the oracle must report it.
 """
 
 import os
@@ -31,8 +33,11 @@ def main(argv) -> int:
         settings.fault_rate = float(argv[3])
     if len(argv) > 4:
         settings.timeout_s = float(argv[4])
+    if len(argv) > 5:
+        settings.broken = argv[5]  # a deliberately broken node (soak_broken.VARIANTS)
     print(f'node soak: {settings.duration_s:.0f} s, {settings.fault_rate:.0%} faults, seed '
-          f'{settings.seed}, timeout {settings.timeout_s * 1000:.0f} ms', flush=True)
+          f'{settings.seed}, timeout {settings.timeout_s * 1000:.0f} ms'
+          + (f', BROKEN: {settings.broken}' if settings.broken else ''), flush=True)
     rclpy.init()
     try:
         with tempfile.TemporaryDirectory(prefix='drive_bridge_soak_') as directory:
@@ -41,7 +46,7 @@ def main(argv) -> int:
         rclpy.try_shutdown()
     for line in report.lines():
         print(line)
-    if not report.passed:
+    if not report.passed and not settings.broken:
         print(report.output[-4000:])
     return 0 if report.passed else 1
 

@@ -21,6 +21,9 @@ from dataclasses import dataclass, field, replace
 import os
 import random
 import signal
+import subprocess
+import sys
+import tempfile
 import time
 from typing import Dict, List, Optional, Tuple
 
@@ -42,6 +45,7 @@ SERVICES = {'mcd': ('start', 'stop', 'quick_stop', 'reset'),
             'drive': ('start', 'stop', 'quick_stop', 'coast_stop', 'reset'),
             'lvsg': ('start', 'stop', 'quick_stop', 'reset')}
 LEFT_RUNNING = 'press'  # stop_on_shutdown: false
+PATCHED_NODE = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'soak_patched_node.py')
 
 
 def node_line() -> Tuple[LineDevice, ...]:
@@ -66,6 +70,7 @@ class NodeSoakSettings:
     trip_period_s: float = 8.0
     invalid_reference_share: float = 0.1
     lvsg_quick_stop: bool = False  # a known bug (see drive_bridge.tools.soak.SoakSettings)
+    broken: str = ''  # run the node broken on purpose (soak_broken.VARIANTS)
 
 
 @dataclass
@@ -234,6 +239,16 @@ class _Driver:
         self.client.call(device.name, self.random.choice(self.commands[device.kind]))
 
 
+def start_broken_node(params_file: str, variant: str) -> subprocess.Popen:
+    """Start the node broken as ``variant`` says (soak_patched_node.py), as start_node does."""
+    log = tempfile.NamedTemporaryFile('w+', prefix='drive_bridge_node_', suffix='.log')
+    process = subprocess.Popen(
+        [sys.executable, PATCHED_NODE, variant, '--ros-args', '--params-file', params_file],
+        env=dict(os.environ), stdout=log, stderr=log, text=True)
+    process.log = log
+    return process
+
+
 def run_node_soak(settings: NodeSoakSettings, directory: str) -> NodeSoakReport:
     """Run the node on the soak line for ``settings.duration_s``, SIGTERM it, check it."""
     devices = node_line()
@@ -245,7 +260,9 @@ def run_node_soak(settings: NodeSoakSettings, directory: str) -> NodeSoakReport:
     log = ClientLog(lambda: server.seq)
     client = _Client(devices, log)
     bus, values = line_config(port, settings.timeout_s, settings.poll_rate_hz, devices)
-    process = start_node(write_params(os.path.join(directory, 'soak.yaml'), bus, values))
+    params = write_params(os.path.join(directory, 'soak.yaml'), bus, values)
+    process = start_broken_node(params, settings.broken) if settings.broken else \
+        start_node(params)
     disturbances = Disturbances(server, time.monotonic, random.Random(settings.seed + 2),
                                 settings.outage_period_s, settings.outage_s,
                                 settings.trip_period_s, devices)

@@ -33,8 +33,9 @@ Timing: in an *exact* record the client's calls and the bus's answers happen bet
 transactions of the line (the bus runs in the client's thread), so a command's own writes
 are the line's last requests when its answer comes. Otherwise (the node: answers travel
 through ROS) an answer is placed when the client received it, and a command's writes lie
-between its asking and its answer; a stop then ends a run only from its answer on. Both are
-sound: a correct bridge gives no violation.
+between its asking and its answer; a stop then ends a run only from its answer on, and an
+answer or a notice takes effect one request late (the request the master may have given up
+on can still wait in the simulator). Both are sound: a correct bridge gives no violation.
 """
 
 from collections import Counter, defaultdict
@@ -295,6 +296,10 @@ class Oracle:
         self.frames = frames
         self.client = client
         self.exact = client.exact
+        # Not exact: one request may still wait in the simulator when the client records an
+        # answer or a notice (the master gave up on it, the simulator takes it after), so an
+        # end takes effect one request later.
+        self.slack = 0 if self.exact else 1
         self.devices = {device.name: device for device in devices}
         self._by_unit: Dict[int, List[WireFrame]] = defaultdict(list)
         for frame in frames:
@@ -359,12 +364,12 @@ class Oracle:
                 continue
             items.append((request.asked_seq, 1, request.index, 'ask', request))
             if request.answered_seq is not None:
-                items.append((request.answered_seq, 1, request.answer_index, 'answer',
-                              request))
-        items += [(notice.seq, 1, notice.index, 'notice', notice)
+                items.append((request.answered_seq + self.slack, 1, request.answer_index,
+                              'answer', request))
+        items += [(notice.seq + self.slack, 1, notice.index, 'notice', notice)
                   for notice in self.client.notices
                   if notice.device == device.name and notice.kind in ('offline', 'tripped')]
-        items += [(shutdown.seq, 1, shutdown.index, 'shutdown', shutdown)
+        items += [(shutdown.seq + self.slack, 1, shutdown.index, 'shutdown', shutdown)
                   for shutdown in self.client.shutdowns]
         return sorted(items, key=lambda item: item[:3])
 
@@ -430,11 +435,11 @@ class Oracle:
                 if hard:
                     start.hard = start.hard or reason
 
-    @staticmethod
-    def _spent(start: _Start, seq: int) -> bool:
+    def _spent(self, start: _Start, seq: int) -> bool:
         """Return whether a start can explain nothing after ``seq`` (``latest`` keeps it)."""
         request = start.request
-        window_passed = request.answered_seq is not None and request.answered_seq < seq
+        window_passed = request.answered_seq is not None and \
+            request.answered_seq + self.slack < seq
         return bool(start.ended) and (start.own_seq is not None or window_passed or
                                       request.outcome not in MAY_HAVE_RUN)
 
@@ -451,7 +456,7 @@ class Oracle:
                 return True
             return request.outcome == UNACKNOWLEDGED and seq == request.answered_seq + 1 \
                 and not self._device_frame(request, request.answered_seq)
-        return seq <= request.answered_seq
+        return seq <= request.answered_seq + self.slack
 
     def _device_frame(self, request: Request, seq: int) -> bool:
         """Return whether line frame ``seq`` went to the device of ``request``."""
@@ -467,7 +472,7 @@ class Oracle:
         if request.outcome in (ACKNOWLEDGED, ''):
             return written
         if request.outcome == UNACKNOWLEDGED:
-            return written and seq <= request.answered_seq
+            return written and seq <= request.answered_seq + self.slack
         return False
 
     def _explain(self, replay: _Replay, frame: WireFrame) -> Optional[Violation]:
@@ -501,7 +506,7 @@ class Oracle:
         asked = f'the latest {self._asked(request)}'
         if request.outcome in (NOT_SENT, REJECTED):
             return 'run_without_start', f'{asked} was {self._answered(request)}'
-        if request.outcome == UNACKNOWLEDGED and request.answered_seq < frame.seq:
+        if request.outcome == UNACKNOWLEDGED and request.answered_seq + self.slack < frame.seq:
             return 'run_after_failed_start', f'{asked} was {self._answered(request)}'
         if latest.ended:
             return 'run_after_end', f'{asked} had ended: {latest.ended}'
@@ -616,7 +621,7 @@ class Oracle:
                                          f'received {self._frame_text(frame)} after the '
                                          'shutdown')
                                for frame in self._by_unit[device.unit]
-                               if frame.seq > last.seq and frame.writes]
+                               if frame.seq > last.seq + self.slack and frame.writes]
         return violations
 
 
