@@ -88,6 +88,7 @@ class NodeSoakReport:
     offline_notices: int = 0
     violations: List[Violation] = field(default_factory=list)
     unanswered: int = 0  # calls that never got a reply
+    unanswered_calls: List[str] = field(default_factory=list)
     final_starts: Dict[str, str] = field(default_factory=dict)  # device -> outcome
     left_running: str = ''  # what runs at the stop_on_shutdown: false device afterwards
     exit_code: Optional[int] = None
@@ -111,7 +112,8 @@ class NodeSoakReport:
                  + f'; requests during outages {self.silenced}',
                  f'outages {self.outages}, trips {self.trips}, offline states '
                  f'{self.offline_notices}',
-                 f'calls never answered: {self.unanswered}',
+                 f'calls never answered: {self.unanswered}'
+                 + ''.join(f'; {call}' for call in self.unanswered_calls),
                  'started before SIGTERM: ' + ', '.join(
                      f'{name} {outcome}' for name, outcome in sorted(self.final_starts.items())),
                  f'{LEFT_RUNNING} (stop_on_shutdown false) afterwards: '
@@ -309,6 +311,9 @@ def _shut_down(server, client: _Client, log: ClientLog, disturbances: Disturbanc
     server.faults.set_plan(FaultPlan(0.0, plan.kinds, plan.seed, slow_s=plan.slow_s))
     _wait_for_replies(client, 15.0)
     report.unanswered = len(client.pending)
+    report.unanswered_calls = [f'{request.device}/{request.command} asked at '
+                               f'{request.asked_s - log.started_s:.3f} s'
+                               for request, _ in client.pending]
     # Something to stop: every device the node controls is reset and started once more.
     client.spin_until(lambda: not any(client.offline.values()), 15.0)
     controlled = [device.name for device in client.devices

@@ -78,6 +78,8 @@ class WireFrame:
     executed: bool  # the device acted on it (served, answered without an exception)
     control: Optional[ControlWrite] = None
     silenced: bool = False  # a served device that was silent then (an outage)
+    late: bool = False  # taken from a backlog: it was on the wire earlier than its place
+
 
     @property
     def writes(self) -> bool:
@@ -233,6 +235,21 @@ class RecordingServer(ModbusSimServer):
     def seq(self) -> int:
         """Return the number of requests the line carried so far."""
         return len(self.frames)
+
+    def _process(self, connection, gap_elapsed: bool) -> None:
+        """
+        Take what one read brought; mark a backlog.
+
+        A master sends its next request only after the reply to the last one, or after
+        giving up on it: several requests in one read mean this thread was held up (a
+        loaded machine) and took them late, so their place on the line is uncertain.
+        """
+        first = len(self.frames)
+        super()._process(connection, gap_elapsed)
+        if len(self.frames) - first > 1:
+            with self.lock:
+                self.frames[first:] = [replace(frame, late=True)
+                                       for frame in self.frames[first:]]
 
     def _answer(self, frame: RtuFrame, raw: bytes,
                 fault: Optional[str] = None) -> Optional[RtuFrame]:

@@ -18,7 +18,10 @@ The invariants (the README's safety model):
    is rewritten (keepalive) only while that start is in force: not after a stop, quick stop,
    coast stop or reset was asked for (whatever its outcome), after the client was told the
    start failed, after a newer start that was sent failed, after the device reported a trip,
-   after it went offline (and came back), or after the shutdown's stops.
+   after it went offline (and came back), or after the shutdown's stops; one that went
+   offline holding a run gets a stop word once it answers again (``no_stop_after_outage``).
+   A request the simulator took from a backlog (``WireFrame.late``: its thread was held up)
+   is not judged by these timing rules; the others still apply to it.
 2. A start answered as failed never reaches the wire after the failure was reported, and
    went out at most once (kinds ``run_after_failed_start``, ``start_twice``).
 3. Every acknowledged command reached the device: the device executed its write(s), and
@@ -57,6 +60,9 @@ NOT_SENT = 'not sent'  # refused before sending, expired, dropped
 OUTCOMES = (ACKNOWLEDGED, UNACKNOWLEDGED, REJECTED, NOT_SENT)
 MAY_HAVE_RUN = (ACKNOWLEDGED, UNACKNOWLEDGED, '')  # '' = never answered
 STOP_CLASS = ('stop', 'quick_stop', 'coast_stop', 'reset', 'forced_comms_trip')
+# After an outage the stop image goes out with the first poll (the probe); a few polls' worth
+# of requests leave room for a spoiled keepalive write.
+STOP_AFTER_OUTAGE_FRAMES = 12
 # The writes that carry out each command, in order; each entry is the set of labels the
 # write may carry (soak_line.ControlWrite.label). From the manuals: MCD register 40002 (one
 # write); the FC profile (a reset is the reset bit, then a ramp stop); the gateway image
@@ -75,6 +81,8 @@ VIOLATION_KINDS: Dict[str, str] = {
     'run_after_end': 'a run image written after its start had ended (stop asked, newer '
                      'start failed, offline, trip, shutdown)',
     'run_after_failed_start': 'a start on the wire after the client was told it failed',
+    'no_stop_after_outage': 'a drive or gateway that went offline holding a run got no stop '
+                            'word once it answered again',
     'start_twice': 'one start request executed more than once',
     'start_after_stop': 'a start written after a stop asked later had been carried out',
     'ack_not_on_wire': 'a command answered as acknowledged that the device never executed',
@@ -278,6 +286,16 @@ class _Start:
 
 
 @dataclass
+class _OwedStop:
+    """A level device went offline holding a run: it must get a stop word after the outage."""
+
+    notice: Notice
+    start: _Start
+    online: bool = False
+    frames: int = 0  # requests to the device since it answered again
+
+
+@dataclass
 class _Replay:
     """The state of one device's replay."""
 
@@ -286,6 +304,7 @@ class _Replay:
     by_index: Dict[int, _Start] = field(default_factory=dict)
     latest: Optional[_Start] = None  # the latest start asked for
     latest_sent: Optional[_Start] = None  # the latest that may have reached the device
+    owed_stop: Optional[_OwedStop] = None
 
 
 class Oracle:
@@ -355,10 +374,9 @@ class Oracle:
 
     # -- invariants 1 and 2: starts and run images ----------------------------------------
     def _events(self, device: DeviceInfo) -> List[tuple]:
-        """Return the device's frames that may run it and the client's records, in order."""
+        """Return the device's frames and the client's records about it, in line order."""
         items = [(frame.seq, 0, frame.seq, 'frame', frame)
-                 for frame in self._by_unit[device.unit]
-                 if frame.executed and frame.control is not None and frame.control.run]
+                 for frame in self._by_unit[device.unit]]
         for request in self.client.requests:
             if request.device != device.name:
                 continue
@@ -368,7 +386,7 @@ class Oracle:
                               'answer', request))
         items += [(notice.seq + self.slack, 1, notice.index, 'notice', notice)
                   for notice in self.client.notices
-                  if notice.device == device.name and notice.kind in ('offline', 'tripped')]
+                  if notice.device == device.name]
         items += [(shutdown.seq + self.slack, 1, shutdown.index, 'shutdown', shutdown)
                   for shutdown in self.client.shutdowns]
         return sorted(items, key=lambda item: item[:3])
@@ -378,22 +396,54 @@ class Oracle:
         violations: List[Violation] = []
         for seq, _, _, kind, item in self._events(device):
             if kind == 'frame':
-                violation = self._explain(replay, item)
-                if violation is not None:
-                    violations.append(violation)
+                violations += self._on_frame(replay, item)
             elif kind == 'ask':
                 self._on_ask(replay, item)
             elif kind == 'answer':
                 self._on_answer(replay, item)
             elif kind == 'notice':
-                reason = f'{device.name} reported {item.kind} at ' \
-                    f'{self._at(item.time_s, item.seq)}'
-                self._end(replay, item.index, reason, hard=True)
+                self._on_notice(replay, item)
             else:
                 reason = f'the shutdown at {self._at(item.time_s, item.seq)}'
                 self._end(replay, item.index, reason, hard=True)
             replay.live = [start for start in replay.live if not self._spent(start, seq)]
         return violations
+
+    def _on_frame(self, replay: _Replay, frame: WireFrame) -> List[Violation]:
+        control = frame.control if frame.executed else None
+        owed = replay.owed_stop
+        if owed is not None and control is not None:
+            replay.owed_stop = None  # a stop word, or a run word the run rules judge
+        elif owed is not None and owed.online:
+            owed.frames += 1
+            if owed.frames > STOP_AFTER_OUTAGE_FRAMES:
+                replay.owed_stop = None
+                return [Violation(
+                    'no_stop_after_outage', replay.device.name, frame.seq,
+                    f'{self._who(replay.device)} went offline at '
+                    f'{self._at(owed.notice.time_s, owed.notice.seq)} holding the run of the '
+                    f'{self._asked(owed.start.request)}, but executed no control write in '
+                    f'the {STOP_AFTER_OUTAGE_FRAMES} requests after it answered again (up to '
+                    f'{self._at(frame.time_s, frame.seq)})')]
+        if control is None or not control.run or frame.late:
+            return []  # a late frame's place among the client's records is not known
+        violation = self._explain(replay, frame)
+        return [] if violation is None else [violation]
+
+    def _on_notice(self, replay: _Replay, notice: Notice) -> None:
+        device = replay.device
+        if notice.kind == 'online':
+            if replay.owed_stop is not None:
+                replay.owed_stop.online = True
+            return
+        if notice.kind == 'offline' and device.level and replay.owed_stop is None:
+            held = [start for start in replay.live if not start.ended and
+                    start.request.outcome in (ACKNOWLEDGED, '') and
+                    (start.own_seq is not None or not self.exact)]
+            if held:
+                replay.owed_stop = _OwedStop(notice, held[-1])
+        reason = f'{device.name} reported {notice.kind} at {self._at(notice.time_s, notice.seq)}'
+        self._end(replay, notice.index, reason, hard=True)
 
     def _on_ask(self, replay: _Replay, request: Request) -> None:
         if request.command == 'start':
@@ -484,8 +534,9 @@ class Oracle:
         kept = device.level and any(self._may_keep(start, frame.seq) for start in replay.live)
         if kept and not (self.exact and own):
             return None
-        if own:
-            start = own[0]
+        if own:  # the most likely owner: one whose own write may still go out, the latest
+            start = max(own, key=lambda candidate: (not candidate.hard,
+                                                    candidate.request.index))
             start.own_seq = frame.seq
             if start.hard:
                 return Violation('start_after_stop', device.name, frame.seq,
