@@ -80,7 +80,6 @@ class WireFrame:
     silenced: bool = False  # a served device that was silent then (an outage)
     late: bool = False  # taken from a backlog: it was on the wire earlier than its place
 
-
     @property
     def writes(self) -> bool:
         """Return whether the request is a write (any function that may change the device)."""
