@@ -312,14 +312,15 @@ class Oracle:
     """Check a run's two records against the invariants; see the module docstring."""
 
     def __init__(self, frames: Sequence[WireFrame], client: ClientLog,
-                 devices: Iterable[DeviceInfo]):
+                 devices: Iterable[DeviceInfo], slack: Optional[int] = None):
         self.frames = frames
         self.client = client
         self.exact = client.exact
-        # Not exact: one request may still wait in the simulator when the client records an
-        # answer or a notice (the master gave up on it, the simulator takes it after), so an
-        # end takes effect one request later.
-        self.slack = 0 if self.exact else 1
+        # One request may still wait in a simulator on its own thread when the client
+        # records an answer, a notice or a stop (the master gave up on it, the simulator
+        # takes it after): then an end takes effect one request later. Default: none for an
+        # exact record (a virtual line has no such wait), one otherwise.
+        self.slack = (0 if self.exact else 1) if slack is None else slack
         self.devices = {device.name: device for device in devices}
         self._by_unit: Dict[int, List[WireFrame]] = defaultdict(list)
         for frame in frames:
@@ -381,7 +382,8 @@ class Oracle:
         for request in self.client.requests:
             if request.device != device.name:
                 continue
-            items.append((request.asked_seq, 1, request.index, 'ask', request))
+            shift = self.slack if request.command in STOP_CLASS else 0
+            items.append((request.asked_seq + shift, 1, request.index, 'ask', request))
             if request.answered_seq is not None:
                 items.append((request.answered_seq + self.slack, 1, request.answer_index,
                               'answer', request))

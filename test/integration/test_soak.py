@@ -33,17 +33,19 @@ def report_text(report) -> str:
     return '\n'.join(report.lines(most=10))
 
 
-def test_short_soak_over_a_pty_meets_the_invariants_and_counts_every_fault_by_kind():
-    # 0.2 s timeout: the 'slow' faults (140 ms) and the 'slow' mark (100 ms) keep wide
-    # margins from the normal replies (a few ms on a pty) on a loaded test machine.
+def test_short_soak_over_a_pty_meets_the_invariants_and_counts_every_fault_kind():
+    # Real time: on a loaded machine a held-up simulator thread answers late, and a late
+    # normal reply counts as slow or lost. The oracle allows for that (a request it took
+    # late is not judged by time); the exact count by kind is the virtual soak's to check,
+    # here every kind must be seen by the real serial transport as its own kind.
     report = run_soak(SoakSettings(transactions=2000, fault_rate=0.1, seed=7, timeout_s=0.2))
     text = report_text(report)
     print(text)
     assert report.transactions >= 2000, text
     assert report.crashes == 0, report.crash_texts
     assert report.violations == [], text
-    assert all(report.injected[kind] > 0 for kind in COUNTED_AS), text  # every kind ran
-    assert report.faults_match, text
+    assert all(report.injected[kind] > 0 and report.counted[kind] > 0
+               for kind in COUNTED_AS), text
     assert report.commands['start acknowledged'] > 0 and report.commands['stop acknowledged'] > 0
     assert report.longest_gap_online_s < 5.0, text  # the dead device never stalls the others
 
@@ -52,7 +54,8 @@ def test_virtual_soak_of_the_unbroken_bridge_meets_every_invariant():
     report = run_soak(CATCH)
     text = report_text(report)
     print(text)
-    assert report.passed, text
+    assert report.passed, text  # no violation, and every fault counted exactly by kind
+    assert report.faults_match and all(report.injected[kind] > 0 for kind in COUNTED_AS)
     # It exercised what the invariants are about (otherwise a pass would say nothing).
     for outcome in ('start acknowledged', 'start unacknowledged', 'start not sent',
                     'stop acknowledged', 'reset acknowledged', 'quick_stop acknowledged'):
