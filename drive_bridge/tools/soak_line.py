@@ -34,9 +34,8 @@ WRITE_FUNCTIONS = (rtu.WRITE_SINGLE_COIL, rtu.WRITE_SINGLE_REGISTER, rtu.WRITE_M
 MCD_COMMAND_ADDRESS = 1
 MCD_COMMAND_NAMES = {1: 'start', 2: 'stop', 3: 'reset', 4: 'quick_stop', 5: 'forced_comms_trip'}
 # FC profile over Modbus (manual 004 section 5.2.8): coils 1-16 control word, 17-32 reference;
-# registers 50000 (CTW) and 50010 (REF), frame addresses 49999 and 50009.
-DRIVE_PROCESS_COILS = 32
-DRIVE_CTW_REGISTER, DRIVE_REF_REGISTER = 49999, 50009
+# register 50000 (CTW), frame address 49999.
+DRIVE_CTW_REGISTER = 49999
 KINDS = ('mcd', 'drive', 'lvsg')
 TURNAROUND_S = 0.001  # a virtual device's time to answer
 
