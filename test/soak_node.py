@@ -322,14 +322,15 @@ def _shut_down(server, client: _Client, log: ClientLog, disturbances: Disturbanc
         asked = [client.call(name, command) for name in controlled]
         _wait_for_replies(client, 15.0)
     report.final_starts = {request.device: request.outcome for request in asked}
-    log.shutdown()
+    log.shutdown(ends_runs=False)  # the node takes the signal a moment later
     signalled = time.monotonic()
     process.send_signal(signal.SIGTERM)
     try:
         report.exit_code = process.wait(timeout=30.0)
-    except Exception:  # noqa: B902 - a node that does not exit fails the run
-        report.exit_code = None
+    except subprocess.TimeoutExpired:
+        report.exit_code = None  # a node that does not exit fails the run
     report.shutdown_s = time.monotonic() - signalled
+    log.shutdown()
     states = running_motors(server, client.devices)
     report.left_running = states.get(LEFT_RUNNING, '')
     return states

@@ -35,9 +35,9 @@ class Line:
         self.frames.append(WireFrame(len(self.frames) + 1, 0.0, unit, function, b'\0' * 4,
                                      fault, executed, control))
 
-    def check(self, *devices) -> list:
+    def check(self, *devices, final_states=None) -> list:
         return [violation.kind
-                for violation in Oracle(self.frames, self.log, devices).check()]
+                for violation in Oracle(self.frames, self.log, devices).check(final_states)]
 
 
 def test_keepalive_of_an_acknowledged_start_until_a_stop_is_asked():
@@ -188,3 +188,22 @@ def test_a_lost_start_taken_late_by_the_simulator_is_its_own_write_not_a_resend(
     line.log.answer(start, UNACKNOWLEDGED)
     line.mcd(21, 1)  # sent again after the failure was reported
     assert line.check(PRESS) == ['run_after_failed_start']
+
+
+def test_a_signal_ends_nothing_until_the_bridge_exits_but_a_device_left_running_gets_no_write():
+    left = DeviceInfo('press', 21, 'mcd', stop_on_shutdown=False)
+    line = Line(exact=False)
+    start = line.log.ask('fan', 'start')
+    line.drive(2, RUN)
+    line.log.answer(start, ACKNOWLEDGED)
+    line.log.shutdown(ends_runs=False)  # SIGTERM sent
+    line.read(2)
+    line.drive(2, RUN)  # the node has not taken the signal yet
+    line.drive(2, STOP)
+    line.log.shutdown()  # the node exited
+    stopped = {'fan': '', 'press': 'starter state 3'}  # press is left running: allowed
+    assert line.check(FAN, left, final_states=stopped) == []
+    line.mcd(21, 2)
+    assert line.check(FAN, left, final_states=stopped) == ['shutdown_write']
+    assert line.check(FAN, left, final_states={'fan': 'control word 0x047C (run)'}) == \
+        ['not_stopped', 'shutdown_write']
