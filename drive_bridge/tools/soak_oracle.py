@@ -435,10 +435,12 @@ class Oracle:
                     f'{self._asked(owed.start.request)}, but executed no control write in '
                     f'the {STOP_AFTER_OUTAGE_FRAMES} requests after it answered again (up to '
                     f'{self._at(frame.time_s, frame.seq)})')]
-        if control is None or not control.run or frame.late:
-            return []  # a late frame's place among the client's records is not known
-        violation = self._explain(replay, frame)
-        return [] if violation is None else [violation]
+        if control is None or not control.run:
+            return []
+        violation = self._explain(replay, frame)  # a late frame: still someone's own write
+        if violation is None or frame.late:  # but its place among the records is not known
+            return []
+        return [violation]
 
     def _on_notice(self, replay: _Replay, notice: Notice) -> None:
         device = replay.device

@@ -207,3 +207,18 @@ def test_a_signal_ends_nothing_until_the_bridge_exits_but_a_device_left_running_
     assert line.check(FAN, left, final_states=stopped) == ['shutdown_write']
     assert line.check(FAN, left, final_states={'fan': 'control word 0x047C (run)'}) == \
         ['not_stopped', 'shutdown_write']
+
+
+def test_a_late_request_is_not_judged_by_time_but_is_still_a_start_s_own_write():
+    line = Line()
+    start = line.log.ask('fan', 'start')
+    line.drive(2, RUN)
+    line.frames[-1] = WireFrame(1, 0.0, 2, 0x0F, b'\0' * 4, None, True,
+                                line.frames[-1].control, late=True)
+    line.log.answer(start, ACKNOWLEDGED)
+    line.drive(2, RUN)  # the keepalive of that start
+    line.read(2)
+    line.log.notice('fan', 'offline')
+    line.frames.append(WireFrame(4, 0.0, 2, 0x0F, b'\0' * 4, None, True,
+                                 line.frames[1].control, late=True))  # sent before the notice
+    assert line.check(FAN) == []
