@@ -130,21 +130,21 @@ class NodeSoakReport:
 class _Client:
     """The rclpy side: service calls, speed references, and the states it is told."""
 
-    def __init__(self, devices: Tuple[LineDevice, ...], log: ClientLog):
+    def __init__(self, devices: Tuple[LineDevice, ...], log: ClientLog, namespace: str):
         self.devices = devices
         self.log = log
         self.node = rclpy.create_node(f'soak_client_{os.getpid()}')
         self.offline: Dict[str, bool] = {}
         self.calls = {(device.name, command): self.node.create_client(
-            Trigger, f'{device.name}/{command}')
+            Trigger, f'{namespace}/{device.name}/{command}')
             for device in devices for command in SERVICES[device.kind]}
         self.references = {device.name: self.node.create_publisher(
-            Float32, f'{device.name}/speed_reference', 10)
+            Float32, f'{namespace}/{device.name}/speed_reference', 10)
             for device in devices if device.kind == 'drive'}
         self.states: Dict[str, str] = {}
         for device in devices:
             self.node.create_subscription(
-                String, f'{device.name}/state',
+                String, f'{namespace}/{device.name}/state',
                 lambda message, name=device.name: self._on_state(name, message.data), LATCHED)
         self.pending: List[Tuple[Request, object]] = []
 
@@ -241,12 +241,12 @@ class _Driver:
         self.client.call(device.name, self.random.choice(self.commands[device.kind]))
 
 
-def start_broken_node(params_file: str, variant: str) -> subprocess.Popen:
+def start_broken_node(params_file: str, variant: str, namespace: str) -> subprocess.Popen:
     """Start the node broken as ``variant`` says (soak_patched_node.py), as start_node does."""
     log = tempfile.NamedTemporaryFile('w+', prefix='drive_bridge_node_', suffix='.log')
     process = subprocess.Popen(
-        [sys.executable, PATCHED_NODE, variant, '--ros-args', '--params-file', params_file],
-        env=dict(os.environ), stdout=log, stderr=log, text=True)
+        [sys.executable, PATCHED_NODE, variant, '--ros-args', '--params-file', params_file,
+         '-r', f'__ns:={namespace}'], env=dict(os.environ), stdout=log, stderr=log, text=True)
     process.log = log
     return process
 
@@ -260,11 +260,14 @@ def run_node_soak(settings: NodeSoakSettings, directory: str) -> NodeSoakReport:
     server.start()
     report = NodeSoakReport()
     log = ClientLog(lambda: server.seq)
-    client = _Client(devices, log)
+    # A namespace of its own: another process in the same ROS domain (a test run beside
+    # this one) may have devices of the same names.
+    namespace = f'/soak{os.getpid()}'
+    client = _Client(devices, log, namespace)
     bus, values = line_config(port, settings.timeout_s, settings.poll_rate_hz, devices)
     params = write_params(os.path.join(directory, 'soak.yaml'), bus, values)
-    process = start_broken_node(params, settings.broken) if settings.broken else \
-        start_node(params)
+    process = start_broken_node(params, settings.broken, namespace) if settings.broken else \
+        start_node(params, namespace)
     disturbances = Disturbances(server, time.monotonic, random.Random(settings.seed + 2),
                                 settings.outage_period_s, settings.outage_s,
                                 settings.trip_period_s, devices)
