@@ -1,18 +1,142 @@
-"""The soak, short: a mixed bus with 10 % injected faults (bench/soak.py runs 100,000)."""
+"""
+The soak and its oracle (bench/soak.py runs 100,000 transactions).
 
-from drive_bridge.tools.soak import COUNTED_AS, run_soak, SoakSettings
+- A short soak over a pty (the bridge's serial transport, real time) meets every invariant
+  and counts every injected fault by kind.
+- On the virtual line (deterministic for a seed, whatever the machine's load) the unbroken
+  bridge gives no violation, and each deliberately broken bridge
+  (:mod:`drive_bridge.tools.soak_broken`) is caught: the proof that the audit is an oracle.
+- Two bugs the oracle found, each as an xfail test that passes once the bridge is fixed.
+"""
+
+from drive_bridge.sim.mcd_model import STARTING
+from drive_bridge.tools.soak import (
+    COUNTED_AS, run_soak, SoakRun, SoakSettings, transport_class)
+from drive_bridge.tools.soak_broken import broken, EXPECTED_KINDS, VARIANTS
+import pytest
+
+# The virtual soak of the catch tests: 10,000 transactions, about 3 minutes of line time
+# with outages and trips, 1-2 s of CPU.
+CATCH = SoakSettings(transactions=10_000, line='virtual', seed=11, timeout_s=0.2)
+STOP_OVERTAKES_START = (
+    'BusMaster queues stops before other jobs, so a stop asked after a start that is still '
+    'queued for the same device is sent first and the start after it: the motor runs '
+    'although the latest request was a stop (oracle: start_after_stop, run_after_end)')
+GATEWAY_QUICK_STOP = (
+    'LvsgProfile.command_plan builds a quick stop from the image of the last poll, not '
+    'from what the last command wrote: right after a stop or reset it sets Fwd Run again '
+    '(with Quick Stop), a rising Fwd Run that starts a ready MCD 200 (oracle: '
+    'run_after_end, ack_not_on_wire)')
 
 
-def test_short_soak_meets_the_zeros_and_counts_every_fault_by_kind():
-    # 0.2 s timeout: the 'slow' faults (140 ms) and the 'slow' mark (100 ms) keep wide
-    # margins from the normal replies (a few ms on a pty) on a loaded test machine.
-    report = run_soak(SoakSettings(transactions=1500, fault_rate=0.1, seed=7, timeout_s=0.2))
-    text = '\n'.join(report.lines())
-    assert report.transactions >= 1500, text
+def report_text(report) -> str:
+    return '\n'.join(report.lines(most=10))
+
+
+def test_short_soak_over_a_pty_meets_the_invariants_and_counts_every_fault_kind():
+    # Real time: on a loaded machine a held-up simulator thread answers late, and a late
+    # normal reply counts as slow or lost. The oracle allows for that (a request it took
+    # late is not judged by time); the exact count by kind is the virtual soak's to check,
+    # here every kind must be seen by the real serial transport as its own kind.
+    report = run_soak(SoakSettings(transactions=2000, fault_rate=0.1, seed=7, timeout_s=0.2))
+    text = report_text(report)
+    print(text)
+    assert report.transactions >= 2000, text
     assert report.crashes == 0, report.crash_texts
-    assert report.unasked_writes == 0, report.unasked_texts
-    assert report.repeated_starts == 0, text
-    assert all(report.injected[kind] > 0 for kind in COUNTED_AS), text  # every kind ran
-    assert report.faults_match, text
+    assert report.violations == [], text
+    assert all(report.injected[kind] > 0 and report.counted[kind] > 0
+               for kind in COUNTED_AS), text
     assert report.commands['start acknowledged'] > 0 and report.commands['stop acknowledged'] > 0
     assert report.longest_gap_online_s < 5.0, text  # the dead device never stalls the others
+
+
+def test_virtual_soak_of_the_unbroken_bridge_meets_every_invariant():
+    report = run_soak(CATCH)
+    text = report_text(report)
+    print(text)
+    assert report.passed, text  # no violation, and every fault counted exactly by kind
+    assert report.faults_match and all(report.injected[kind] > 0 for kind in COUNTED_AS)
+    # It exercised what the invariants are about (otherwise a pass would say nothing).
+    for outcome in ('start acknowledged', 'start unacknowledged', 'start not sent',
+                    'stop acknowledged', 'reset acknowledged', 'quick_stop acknowledged'):
+        assert report.commands[outcome] > 0, outcome
+    assert report.references['accepted'] > 0 and report.references['refused'] > 0
+    assert report.offline_events >= 10 and report.trips >= 10 and report.silenced > 0
+
+
+def test_virtual_soak_is_reproducible_for_a_seed():
+    settings = SoakSettings(transactions=3000, line='virtual', seed=5, timeout_s=0.2)
+    first, second = run_soak(settings), run_soak(settings)
+    assert first.commands == second.commands
+    assert first.injected == second.injected and first.counted == second.counted
+    assert first.line_time_s == second.line_time_s
+
+
+@pytest.mark.parametrize('variant', VARIANTS)
+def test_oracle_catches_a_deliberately_broken_bridge(variant):
+    with broken(variant, transport_class(CATCH.line), CATCH.seed):
+        report = run_soak(CATCH)
+    counts = report.violation_counts
+    print(variant, dict(counts))
+    print(report_text(report))
+    assert report.crashes == 0, report.crash_texts
+    assert any(counts[kind] > 0 for kind in EXPECTED_KINDS[variant]), report_text(report)
+
+
+def test_oracle_catches_dropped_writes_on_the_real_serial_transport():
+    settings = SoakSettings(transactions=600, seed=3, timeout_s=0.2, outage_period_s=0.0,
+                            trip_period_s=0.0)
+    with broken('transport_drops_writes', transport_class('pty'), settings.seed):
+        report = run_soak(settings)
+    print(report_text(report))
+    assert report.violation_counts['ack_not_on_wire'] > 0, report_text(report)
+
+
+def scripted_run(**changes) -> SoakRun:
+    """Return a virtual run without faults or disturbances, devices online, for a script."""
+    run = SoakRun(SoakSettings(line='virtual', fault_rate=0.0, outage_period_s=0.0,
+                               trip_period_s=0.0, **changes))
+    run.run_for(1.0)
+    return run
+
+
+def finish(run: SoakRun) -> str:
+    """Shut the run down and return its violations, one a line."""
+    try:
+        violations = run.check(run.shut_down())
+    finally:
+        run.close()
+    return '\n'.join(violation.line() for violation in violations)
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=STOP_OVERTAKES_START)
+def test_a_start_queued_before_a_stop_never_runs_after_that_stop():
+    run = scripted_run(in_flight_per_device=2)
+    for name in ('crusher', 'feeder', 'mixer'):
+        start = run.ask(name, 'start')
+        stop = run.ask(name, 'stop')  # asked while the start waits in the queue
+        run.run_for(1.0, until=lambda: start.done() and stop.done())
+        run.run_for(0.3)
+    violations = finish(run)
+    assert violations == '', violations
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=GATEWAY_QUICK_STOP)
+def test_gateway_quick_stop_right_after_a_reset_never_sets_fwd_run():
+    run = scripted_run(lvsg_quick_stop=True)
+    starter = run.server.devices[5].slaves[0].model
+    with run.server.lock:
+        starter.trip(1, run.clock())  # at the device; the bridge has not read it yet
+    start = run.ask('mixer', 'start')  # taken (the bridge's reading is not tripped yet)
+    run.run_for(1.0, until=start.done)
+    run.run_for(2.0, until=lambda: run.listener.tripped_told.get('mixer'))
+    reset = run.ask('mixer', 'reset')  # right after the poll that read the trip
+    run.run_for(1.0, until=reset.done)
+    executed_before = len(starter.commands_received)
+    quick_stop = run.ask('mixer', 'quick_stop')  # before the next poll of the mixer
+    run.run_for(1.0, until=quick_stop.done)
+    after_reset = list(starter.commands_received)[executed_before:]
+    started = starter.state == STARTING or 1 in after_reset
+    violations = finish(run)
+    assert not started and violations == '', f'starter commands after the reset: ' \
+        f'{after_reset}\n{violations}'
