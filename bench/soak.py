@@ -5,7 +5,7 @@ Outages and trips too; prints the figures. Devices: MCD 500, MCD 3000, FC 51, VL
 an MCD 202 behind a Profibus gateway, a monitor-only FC 51 and one address nobody answers
 (see :mod:`drive_bridge.tools.soak`). Run:
 .venv/bin/python bench/soak.py [transactions] [fault rate] [seed] [timeout s]
-    [--line pty|virtual] [--broken VARIANT|all] [--in-flight N] [--lvsg-quick-stop]
+    [--line pty|virtual] [--broken VARIANT|all] [--in-flight N] [--no-lvsg-quick-stop]
 ``--broken`` runs deliberately broken bridges (:mod:`drive_bridge.tools.soak_broken`) and
 then the unbroken one with the same settings, and prints what the oracle caught.
 """
@@ -26,10 +26,10 @@ def parse(argv) -> argparse.Namespace:
     parser.add_argument('timeout', nargs='?', type=float, default=0.1)
     parser.add_argument('--line', choices=('pty', 'virtual'), default='pty')
     parser.add_argument('--broken', choices=VARIANTS + ('all',))
-    parser.add_argument('--in-flight', type=int, default=1,
-                        help='commands in flight per device (2: the stop-overtakes-start bug)')
-    parser.add_argument('--lvsg-quick-stop', action='store_true',
-                        help='quick stops to the gateway too (the gateway quick-stop bug)')
+    parser.add_argument('--in-flight', type=int, default=2,
+                        help='commands in flight per device (default 2)')
+    parser.add_argument('--no-lvsg-quick-stop', dest='lvsg_quick_stop', action='store_false',
+                        help='no quick stops to the gateway')
     return parser.parse_args(argv[1:])
 
 

@@ -69,7 +69,7 @@ class NodeSoakSettings:
     outage_s: Tuple[float, float] = (1.0, 2.5)
     trip_period_s: float = 8.0
     invalid_reference_share: float = 0.1
-    lvsg_quick_stop: bool = False  # a known bug (see drive_bridge.tools.soak.SoakSettings)
+    lvsg_quick_stop: bool = True  # quick stops to the gateway too
     broken: str = ''  # run the node broken on purpose (soak_broken.VARIANTS)
 
 

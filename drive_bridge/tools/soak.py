@@ -115,12 +115,11 @@ class SoakSettings:
     command_period_s: float = 0.05  # a random command or speed reference this often
     poll_rate_hz: float = 100.0  # per device: more than the bus can carry, so it is busy
     burst_share: float = 0.2  # share of the steps that send 2-3 commands at once
-    # Two known bridge bugs are left alone unless these are set (test_soak.py keeps an xfail
-    # test of each): a stop overtakes a start queued before it for the same device (more
-    # than one command in flight per device), and a gateway quick stop right after a stop or
-    # reset sets Fwd Run again.
-    in_flight_per_device: int = 1  # commands waiting for their answer, per device
-    lvsg_quick_stop: bool = False  # quick_stop to the gateway's MCD 202
+    # Two commands in flight per device exercise a stop asked while a start still waits;
+    # quick stops to the gateway, its Fwd Run right after a stop or reset (two bugs the
+    # oracle found, fixed; test_soak.py keeps a scripted test of each).
+    in_flight_per_device: int = 2  # commands waiting for their answer, per device
+    lvsg_quick_stop: bool = True  # quick_stop to the gateway's MCD 202
     outage_period_s: float = 6.0  # a device goes silent this often (0: never)
     outage_s: Tuple[float, float] = (1.0, 2.5)
     trip_period_s: float = 8.0  # a device trips this often (0: never)

@@ -22,6 +22,7 @@ import contextlib
 import random
 from typing import Dict, Iterator, Tuple, Type
 
+from drive_bridge.bus.execution import JobRunner
 from drive_bridge.bus.jobs import CommandJob
 from drive_bridge.bus.master import BusMaster
 from drive_bridge.bus.motor import MotorOwner
@@ -65,18 +66,30 @@ def _offline_keeps_command():
     return _patched(MotorOwner, 'on_offline', lambda self, now_s: None)
 
 
+@contextlib.contextmanager
 def _failed_start_resent():
-    original = BusMaster._execute_command
+    resend = []  # starts answered as failed, to be queued again on the bus thread
+    run_command_job = JobRunner._run_command_job
+    run_once = BusMaster.run_once
 
-    def execute_command(self, device, command):
-        try:
-            return original(self, device, command)
-        except TransportError:
-            if command.may_start:  # broken: queued again, behind the caller's back
-                self._jobs.push(CommandJob(device, self.clock() +
-                                           self.timing.command_deadline_s, Future(), command))
-            raise
-    return _patched(BusMaster, '_execute_command', execute_command)
+    def run_command(self, job):
+        run_command_job(self, job)
+        error = job.future.exception() if job.future.done() else None
+        if isinstance(error, TransportError) and job.command.may_start:
+            resend.append(job)  # broken: queued again, behind the caller's back
+
+    def run_once_resending(self):
+        while resend:
+            job = resend.pop()
+            with self._lock:
+                self._jobs.push(CommandJob(job.device, self.clock() +
+                                           self.timing.command_deadline_s, Future(),
+                                           job.command))
+        return run_once(self)
+
+    with _patched(JobRunner, '_run_command_job', run_command), \
+            _patched(BusMaster, 'run_once', run_once_resending):
+        yield
 
 
 def _monitor_only_writes():

@@ -74,13 +74,17 @@ class RtuSerialTransport(SerialPortTransport):
             if result.frame is not None:
                 return result.frame
             if result.error_kind in _NOT_OURS:
+                not_ours = result
                 skipped, buffer = self._skip_late_reply(buffer, deadline)
                 if skipped:
                     if not buffer:
                         buffer = self._read_some(1, deadline - time.monotonic())
-                    if not buffer:
-                        raise NoResponse(f'no reply within {self.settings.timeout_s:g} s '
-                                         '(a late reply to an earlier request came instead)')
+                    if not buffer:  # it was not a late reply but the answer: a wrong one
+                        error_type = _INVALID_REPLY.get(not_ours.error_kind, BadFrame)
+                        raise error_type(f'invalid reply ({not_ours.error}) and no other '
+                                         f'within {self.settings.timeout_s:g} s')
+                    self.last_recovered['late_reply'] = \
+                        self.last_recovered.get('late_reply', 0) + 1
                     needed = rtu.MIN_RESPONSE_BYTES
                     continue
                 result = rtu.decode_response(buffer, unit, function)
@@ -117,7 +121,6 @@ class RtuSerialTransport(SerialPortTransport):
                 return False, buffer
         if not rtu.crc_ok(buffer[:length]):
             return False, buffer
-        self.last_recovered['late_reply'] = self.last_recovered.get('late_reply', 0) + 1
         return True, buffer[length:]
 
     @functools.cached_property

@@ -6,7 +6,7 @@ The soak and its oracle (bench/soak.py runs 100,000 transactions).
 - On the virtual line (deterministic for a seed, whatever the machine's load) the unbroken
   bridge gives no violation, and each deliberately broken bridge
   (:mod:`drive_bridge.tools.soak_broken`) is caught: the proof that the audit is an oracle.
-- Two bugs the oracle found, each as an xfail test that passes once the bridge is fixed.
+- Two bugs the oracle found (fixed), each as a scripted test.
 """
 
 from drive_bridge.sim.mcd_model import STARTING
@@ -18,15 +18,6 @@ import pytest
 # The virtual soak of the catch tests: 10,000 transactions, about 3 minutes of line time
 # with outages and trips, 1-2 s of CPU.
 CATCH = SoakSettings(transactions=10_000, line='virtual', seed=11, timeout_s=0.2)
-STOP_OVERTAKES_START = (
-    'BusMaster queues stops before other jobs, so a stop asked after a start that is still '
-    'queued for the same device is sent first and the start after it: the motor runs '
-    'although the latest request was a stop (oracle: start_after_stop, run_after_end)')
-GATEWAY_QUICK_STOP = (
-    'LvsgProfile.command_plan builds a quick stop from the image of the last poll, not '
-    'from what the last command wrote: right after a stop or reset it sets Fwd Run again '
-    '(with Quick Stop), a rising Fwd Run that starts a ready MCD 200 (oracle: '
-    'run_after_end, ack_not_on_wire)')
 
 
 def report_text(report) -> str:
@@ -109,7 +100,6 @@ def finish(run: SoakRun) -> str:
     return '\n'.join(violation.line() for violation in violations)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=STOP_OVERTAKES_START)
 def test_a_start_queued_before_a_stop_never_runs_after_that_stop():
     run = scripted_run(in_flight_per_device=2)
     for name in ('crusher', 'feeder', 'mixer'):
@@ -121,7 +111,6 @@ def test_a_start_queued_before_a_stop_never_runs_after_that_stop():
     assert violations == '', violations
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=GATEWAY_QUICK_STOP)
 def test_gateway_quick_stop_right_after_a_reset_never_sets_fwd_run():
     run = scripted_run(lvsg_quick_stop=True)
     starter = run.server.devices[5].slaves[0].model

@@ -1,6 +1,6 @@
 """The native RTU engine: a late reply to an earlier request before the reply asked for."""
 
-from drive_bridge.errors import FAILURE_KINDS, NoResponse, WrongAddress
+from drive_bridge.errors import BadFrame, FAILURE_KINDS, WrongAddress
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.transport.link import LinkSettings
@@ -60,10 +60,16 @@ def test_a_late_reply_before_the_reply_asked_for_is_dropped_and_counted(late):
     assert 'late_reply' in FAILURE_KINDS  # /diagnostics lists it as errors_late_reply
 
 
-def test_a_late_reply_and_nothing_after_it_is_no_response():
+def test_a_frame_from_another_address_and_nothing_after_it_is_a_wrong_address():
     transport = transport_with(LATE_FROM_ANOTHER_DEVICE)
-    with pytest.raises(NoResponse, match='late reply'):
+    with pytest.raises(WrongAddress, match='no other within'):
         transport.execute(20, ReadRegisters(0, 3))
+
+
+def test_a_frame_with_another_function_and_nothing_after_it_is_a_bad_frame():
+    transport = transport_with(LATE_POLL_OF_THIS_DEVICE)
+    with pytest.raises(BadFrame, match='function 03h to a 06h request'):
+        transport.execute(20, WriteRegister(1, 1))
 
 
 def test_a_frame_from_another_address_with_a_bad_crc_is_a_wrong_address():
