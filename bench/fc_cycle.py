@@ -1,81 +1,62 @@
 """
-Benchmark: FC 51 cycle time and transactions per cycle at 9600 and 19200 baud, 8E1 timing.
+Benchmark: FC 51 cycle time at 9600 and 19200 baud, 8E1 timing: Modbus RTU and FC protocol.
 
-One simulated FC 51, started (so the control word and reference are rewritten every
-cycle), in a child process, polled as fast as the bus allows through a wire pacer in this
-process (:mod:`drive_bridge.sim.wire_pacer`), not the simulator's own reply pacing: every
-byte takes its 8E1 wire time, the line is half duplex and every frame must follow 3.5
-characters of silence. Prints the cycle time, the transactions per cycle, the wire-time
-minimum of the same frames, and what the pacer's frame log shows: the share of the time the
-line carried whole transactions (gaps included), gap violations and collisions.
+One simulated FC 51, started (so the control word and reference go out every cycle), in a
+child process, polled as fast as the bus allows through a wire pacer in this process
+(:mod:`drive_bridge.sim.wire_pacer`), not the simulator's own reply pacing: every byte takes
+its 8E1 wire time, the line is half duplex and every frame must follow its protocol's
+silence (Modbus RTU 3.5 characters, FC protocol 2). Over Modbus RTU with each serial engine
+and over the FC protocol, for the same drive data (control word, reference, status word,
+main actual value, motor current, the slow readouts every ``readout_period``). Prints, from
+the pacer's frame log: the cycle time, transactions and bytes per cycle, the wire-time
+minimum of the same frames and the fraction of it reached, gap violations and collisions.
 Run: .venv/bin/python bench/fc_cycle.py [seconds per case]
 """
 
-import math
 import sys
 import time
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices import fc
+from drive_bridge.devices.contracts import SlowReadouts
 from drive_bridge.devices.drive import DriveProfile
-from drive_bridge.protocol import rtu
-from drive_bridge.protocol.requests import (
-    ReadCoils, ReadRegisters, WriteCoils, WriteRegister, WriteRegisters)
-from drive_bridge.sim.wire_pacer import LineTiming
-from drive_bridge.transport.modbus import LinkSettings, PYMODBUS_VERSION, wire_time_s
+from drive_bridge.devices.fc_protocol_drive import FcProtocolDriveProfile
+from drive_bridge.protocol import fc_telegram as fcp
+from drive_bridge.sim.wire_pacer import LineTiming, MODBUS_GAP_CHARACTERS, transactions
+from drive_bridge.transport.link import LinkSettings
+from drive_bridge.transport.modbus import PYMODBUS_VERSION
 from drive_bridge.transport.protocols import make_transport
 from paced_line import PacedSimulator
 
-
-def frame_bytes(transaction) -> tuple:
-    """Return (request bytes, reply bytes) of one transaction in RTU framing."""
-    if isinstance(transaction, WriteCoils):
-        return 9 + math.ceil(len(transaction.values) / 8), 8
-    if isinstance(transaction, ReadCoils):
-        return 8, 5 + math.ceil(transaction.count / 8)
-    if isinstance(transaction, ReadRegisters):
-        return 8, 5 + 2 * transaction.count
-    if isinstance(transaction, WriteRegisters):
-        return 9 + 2 * len(transaction.values), 8
-    if isinstance(transaction, WriteRegister):
-        return 8, 8
-    raise TypeError(transaction)
+READOUT_PERIOD_S = 1.0  # the node's default
 
 
-class CountingProfile(DriveProfile):
-    """The FC profile, counting the wire time of every planned transaction."""
-
-    def __init__(self, settings: LinkSettings):
-        super().__init__(fc.DATA, 'fc51')
-        self.settings = settings
-        self.wire_s = 0.0
-        self.transactions = 0
-
-    def poll(self, control):
-        """Run the profile's cycle, counting each step's wire time as it is sent."""
-        cycle = super().poll(control)
-        try:
-            step = next(cycle)
-            while True:
-                self.wire_s += wire_time_s(self.settings, *frame_bytes(step.request))
-                self.transactions += 1
-                step = cycle.send((yield step))
-        except StopIteration as done:
-            return done.value
+def make_bus(line: PacedSimulator, protocol: str, engine: str, readings: list) -> BusMaster:
+    """Return a bus master for one FC 51 on ``line`` over ``protocol``."""
+    baudrate = line.timing.baudrate
+    settings = LinkSettings(protocol=protocol, port=line.path, baudrate=baudrate, parity='N',
+                            timeout_s=0.5)  # the pty takes N; the pacer times 8E1
+    slow = SlowReadouts(READOUT_PERIOD_S)
+    if protocol == 'fc_protocol':
+        profile = FcProtocolDriveProfile(fc.DATA, 'fc51', slow_readouts=slow)
+        options = {}
+    else:
+        profile = DriveProfile(fc.DATA, 'fc51', slow_readouts=slow)
+        options = {'serial_engine': engine}
+    return BusMaster(make_transport(settings, options),
+                     [DeviceSpec('conv', 1, profile, poll_rate_hz=100.0)],
+                     BusTiming(frame_gap_s=line.timing.gap_s),  # the 8E1 gap, not 8N1's
+                     listener=lambda event: readings.append(event.kind == 'reading'))
 
 
-def bench(baudrate: int, seconds: float, engine: str) -> dict:
-    timing = LineTiming(baudrate, 'E', 1)
-    line = PacedSimulator(['fc51:1'], timing)
-    settings = LinkSettings(port=line.path, baudrate=baudrate, parity='N',
-                            timeout_s=0.5)  # the pty takes N (8N2: 11 bits as 8E1)
-    wire_settings = LinkSettings(baudrate=baudrate, parity='E')
-    profile = CountingProfile(wire_settings)
+def bench(baudrate: int, seconds: float, protocol: str, engine: str = '') -> dict:
+    """Poll one started FC 51 as fast as the line allows; return the figures."""
+    gap = fcp.GAP_CHARACTERS if protocol == 'fc_protocol' else MODBUS_GAP_CHARACTERS
+    timing = LineTiming(baudrate, 'E', 1, gap_characters=gap)
+    line = PacedSimulator(['fc51:1'], timing,
+                          protocol='fc_protocol' if protocol == 'fc_protocol' else 'modbus')
     readings = []
-    bus = BusMaster(make_transport(settings, {'serial_engine': engine}),
-                    [DeviceSpec('conv', 1, profile, poll_rate_hz=100.0)],
-                    BusTiming(frame_gap_s=rtu.frame_gap_s(baudrate, 'E', 1)),
-                    listener=lambda event: readings.append(event.kind == 'reading'))
+    bus = make_bus(line, protocol, engine, readings)
     deadline = time.monotonic() + 10.0
     while bus.snapshot('conv').reading is None and time.monotonic() < deadline:
         bus.run_once()  # connect, identify, first reading
@@ -83,37 +64,42 @@ def bench(baudrate: int, seconds: float, engine: str) -> dict:
     while not started.done() and time.monotonic() < deadline:
         bus.run_once()
     started.result(timeout=0)  # the bench measures a running drive: fail loudly otherwise
-    profile.wire_s, profile.transactions, polls_before = 0.0, 0, sum(readings)
+    polls_before = sum(readings)
     started = time.monotonic()
     while time.monotonic() - started < seconds:
         bus.run_once()
     ended = time.monotonic()
-    elapsed = ended - started
     polls = sum(readings) - polls_before
     bus.shutdown(stop_motors=False)
-    fraction = line.wire_figures(started, ended)['fraction']
+    frames = [frame for frame in line.pacer.frames()
+              if started <= frame.start_s and frame.end_s <= ended]
+    pairs = transactions(frames)
+    wire_s = sum(timing.transaction_s(len(request.data), len(reply.data))
+                 for request, reply in pairs)
     counters = line.pacer.counters()
     line.close()
-    return {'cycle_ms': 1000 * elapsed / polls, 'tx_per_cycle': profile.transactions / polls,
-            'wire_ms': 1000 * profile.wire_s / polls, 'polls': polls,
-            'log_fraction': fraction,
-            'violations': counters.gap_violations, 'collisions': counters.collisions}
+    return {'cycle_ms': 1000 * (ended - started) / polls, 'tx_per_cycle': len(pairs) / polls,
+            'bytes_per_cycle': sum(len(request.data) + len(reply.data)
+                                   for request, reply in pairs) / polls,
+            'wire_ms': 1000 * wire_s / polls, 'violations': counters.gap_violations,
+            'collisions': counters.collisions}
 
 
 def main() -> None:
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 5.0
     print(f'pymodbus {PYMODBUS_VERSION}; 1 simulated FC 51 running, 8E1 timing through the '
-          f'wire pacer, {seconds:g} s per case')
-    print('engine    baud   cycle ms  tx/cycle  wire-time ms/cycle  fraction  cycles/s  '
-          'log fraction  gap viol.  collisions')
-    for baudrate, engine in ((9600, 'native'), (9600, 'pymodbus'), (19200, 'native'),
-                             (19200, 'pymodbus')):
-        result = bench(baudrate, seconds, engine)
-        print(f'{engine:8s}  {baudrate:5d}  {result["cycle_ms"]:8.1f}  '
-              f'{result["tx_per_cycle"]:8.2f}  '
-              f'{result["wire_ms"]:18.1f}  {result["wire_ms"] / result["cycle_ms"]:7.1%}  '
-              f'{1000 / result["cycle_ms"]:8.1f}  {result["log_fraction"]:12.1%}  '
-              f'{result["violations"]:9d}  {result["collisions"]:10d}')
+          f'wire pacer, readout_period {READOUT_PERIOD_S:g} s, {seconds:g} s per case')
+    print('protocol     engine    baud  cycle ms  tx/cycle  bytes/cycle  wire ms/cycle  '
+          'fraction  cycles/s  gap viol.  collisions')
+    for baudrate in (9600, 19200):
+        for protocol, engine in (('modbus_rtu', 'native'), ('modbus_rtu', 'pymodbus'),
+                                 ('fc_protocol', '')):
+            result = bench(baudrate, seconds, protocol, engine)
+            print(f'{protocol:11s}  {engine or "-":8s}  {baudrate:5d}  {result["cycle_ms"]:8.1f}  '
+                  f'{result["tx_per_cycle"]:8.2f}  {result["bytes_per_cycle"]:11.1f}  '
+                  f'{result["wire_ms"]:13.1f}  {result["wire_ms"] / result["cycle_ms"]:8.1%}  '
+                  f'{1000 / result["cycle_ms"]:8.1f}  {result["violations"]:9d}  '
+                  f'{result["collisions"]:10d}')
 
 
 if __name__ == '__main__':

@@ -9,7 +9,7 @@ name; the main thread's id is the process id), printed as % of one core; no subs
 matched during the window. The wire fraction achieved is the transactions on the wire
 per second (whole request and reply, by the pacer's frame log) over the wire limit of the
 same mix of frames (request, reply and two 3.5-character gaps each).
-Run: .venv/bin/python bench/node_cpu.py [window seconds]
+Run: .venv/bin/python bench/node_cpu.py [window seconds] [baud rate, default 19200]
 """
 
 import os
@@ -71,9 +71,10 @@ def wait_until_ready(names) -> None:
 
 def main() -> None:
     window_s = float(sys.argv[1]) if len(sys.argv) > 1 else 10.0
-    timing = LineTiming(BAUDRATE, 'E', 1)
+    baudrate = int(sys.argv[2]) if len(sys.argv) > 2 else BAUDRATE
+    timing = LineTiming(baudrate, 'E', 1)
     line = PacedSimulator(simulator_devices(LINE_DEVICES), timing)
-    node = NodeProcess(node_bus(line.path, BAUDRATE), LINE_DEVICES)
+    node = NodeProcess(node_bus(line.path, baudrate), LINE_DEVICES)
     rclpy.init()
     try:
         wait_until_ready(list(LINE_DEVICES))
@@ -96,7 +97,7 @@ def main() -> None:
     def percent(ticks: int) -> float:
         return 100.0 * ticks / TICKS_PER_S / seconds
 
-    print(f'drive_bridge_node, 4 MCD 500 + 4 FC 51 at 100 Hz, {BAUDRATE} baud 8E1 timing '
+    print(f'drive_bridge_node, 4 MCD 500 + 4 FC 51 at 100 Hz, {baudrate} baud 8E1 timing '
           f'through the wire pacer, {seconds:.1f} s window')
     print(f'node CPU: {percent(process_after - process_before):.1f} % of one core')
     print('  tid      thread            % of one core')

@@ -33,9 +33,9 @@ def ros_environment() -> None:
 class PacedSimulator:
     """``drive_bridge_sim`` serving ``devices`` (MODEL:ADDRESS) behind a pacer at ``path``."""
 
-    def __init__(self, devices: Sequence[str], timing: LineTiming):
+    def __init__(self, devices: Sequence[str], timing: LineTiming, protocol: str = 'modbus'):
         self.timing = timing
-        command = [sys.executable, '-m', 'drive_bridge.sim.cli']
+        command = [sys.executable, '-m', 'drive_bridge.sim.cli', '--protocol', protocol]
         for device in devices:
             command += ['--device', device]
         self.process = subprocess.Popen(command, stdin=subprocess.DEVNULL,

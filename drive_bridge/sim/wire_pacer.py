@@ -54,6 +54,7 @@ MAX_INNER_GAP_CHARS = 1.5  # Modbus RTU: a longer silence inside a frame breaks 
 MAX_INNER_GAP_FAST_S = 0.00075  # the fixed t1.5 above 19200 baud
 DEFAULT_LOG_SIZE = 10000
 MAX_FRAME_BYTES = 4096  # a longer burst without a silence goes on as a new frame in the log
+MODBUS_GAP_CHARACTERS = 3.5
 ROUNDING_S = 1e-9  # byte times add up one by one: a silence this much short still counts
 
 
@@ -65,6 +66,7 @@ class LineTiming:
     parity: str = 'E'
     stopbits: int = 1
     gap_rule: bool = True
+    gap_characters: float = MODBUS_GAP_CHARACTERS  # silence before a frame; FC protocol: 2
 
     def __post_init__(self):
         if self.baudrate <= 0:
@@ -81,8 +83,10 @@ class LineTiming:
 
     @property
     def gap_s(self) -> float:
-        """Return the 3.5-character silence before a frame (1.75 ms above 19200 baud)."""
-        return rtu.frame_gap_s(self.baudrate, self.parity, self.stopbits)
+        """Return the silence before a frame: Modbus 3.5 characters (1.75 ms above 19200)."""
+        if self.gap_characters == MODBUS_GAP_CHARACTERS:
+            return rtu.frame_gap_s(self.baudrate, self.parity, self.stopbits)
+        return self.gap_characters * self.char_s
 
     @property
     def inner_gap_s(self) -> float:

@@ -51,6 +51,21 @@ def test_character_times_and_gaps():
             LineTiming(**bad)
 
 
+def test_an_fc_protocol_line_takes_a_frame_after_two_characters_not_fewer():
+    fc_timing = LineTiming(9600, 'E', 1, gap_characters=2)
+    assert fc_timing.gap_s == pytest.approx(2 * CHAR_S)
+    assert fc_timing.transaction_s(16, 16) == pytest.approx(36 * CHAR_S)
+    assert LineTiming(38400, gap_characters=2).gap_s == pytest.approx(2 * 11 / 38400)
+    line = WireLine(fc_timing)
+    reply_end_s = transaction(line, 0.0)
+    line.transmit(MASTER, REQUEST, reply_end_s + 2 * CHAR_S)  # the FC protocol's pause
+    assert line.counters.gap_violations == 0
+    line = WireLine(fc_timing)
+    reply_end_s = transaction(line, 0.0)
+    line.transmit(MASTER, REQUEST, reply_end_s + 1.5 * CHAR_S)  # short of it
+    assert line.counters.gap_violations == 1
+
+
 def test_a_slave_gets_the_request_after_its_wire_time_and_the_gap():
     line = WireLine(TIMING)
     line.transmit(MASTER, REQUEST, 1.0)

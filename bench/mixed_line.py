@@ -1,0 +1,130 @@
+"""
+Benchmark: the node against a naive per-value loop, same fast data, on the mixed line.
+
+4 MCD 500 and 4 FC 51 on one line paced by the wire pacer (8E1 timing, 11 bits a
+character, the 3.5-character gap enforced before every frame), at 9600 and 19200 baud. The
+fast data of a device: MCD status, trip, current and temperature (40003-40006); FC 51 status
+word, main actual value and motor current (16-14).
+
+- naive: pymodbus's serial client (through the bridge's adapter) reads each value with its
+  own request, device after device, and sleeps the 3.5-character gap after each reply itself
+  (pymodbus does not keep it);
+- node: ``drive_bridge_node`` with every device at ``poll_rate`` 100 (as fast as the line
+  allows) and the default ``readout_period`` (1 s), no command in force. Its device polls
+  per second are counted in the pacer's frame log (MCD: a read from 40003; FC 51: the read
+  of coils 33-64), so they are what crossed the wire.
+
+The ratio is the node's data sets per second over the naive loop's. Also printed: the wire
+limit for the node's own mix of frames and the fraction of it the node reached.
+Run: .venv/bin/python bench/mixed_line.py [window s]
+"""
+
+import sys
+import time
+from typing import Dict, Tuple
+
+from drive_bridge.devices.drive import COIL_STATUS
+from drive_bridge.errors import TransportError
+from drive_bridge.protocol import rtu
+from drive_bridge.protocol.requests import ReadCoils, ReadRegisters
+from drive_bridge.sim.wire_pacer import LineTiming, MASTER, transactions
+from drive_bridge.transport.modbus import LinkSettings, ModbusTransport, PYMODBUS_VERSION
+from paced_line import (
+    LINE_DEVICES, node_bus, NodeProcess, PacedSimulator, ros_environment, simulator_devices,
+    wait_for)
+
+ros_environment()
+from node_cpu import wait_until_ready  # noqa: E402, I100 - after the environment it reads
+import rclpy  # noqa: E402, I100
+
+MCD_FIRST_REGISTER = 2  # 40003
+FC_CURRENT_REGISTER = 10 * 1614 - 1  # 16-14
+WARM_UP_S = 2.0
+
+
+def naive_requests(block: Dict) -> Tuple:
+    """Return the per-value requests of one device's fast data."""
+    if block['family'] == 'mcd':
+        return tuple(ReadRegisters(MCD_FIRST_REGISTER + index, 1) for index in range(4))
+    return (ReadCoils(COIL_STATUS, 16), ReadCoils(COIL_STATUS + 16, 16),
+            ReadRegisters(FC_CURRENT_REGISTER, 2))
+
+
+def bench_naive(line: PacedSimulator, seconds: float) -> Tuple[float, int]:
+    """Run the naive loop; return (device data sets/s, failed requests)."""
+    transport = ModbusTransport(LinkSettings(port=line.path, baudrate=line.timing.baudrate,
+                                             parity='N', timeout_s=0.5))
+    transport.connect()
+    plan = [(block['address'], naive_requests(block)) for block in LINE_DEVICES.values()]
+    sets = failures = 0
+    started = time.monotonic()
+    while time.monotonic() - started < seconds:
+        for address, requests in plan:
+            complete = True
+            for request in requests:
+                try:
+                    transport.execute(address, request)
+                except TransportError:
+                    failures += 1
+                    complete = False
+                time.sleep(line.timing.gap_s)
+            sets += complete
+    elapsed = time.monotonic() - started
+    transport.close()
+    return sets / elapsed, failures
+
+
+def is_poll_request(data: bytes) -> bool:
+    """Return whether a master frame is the status read that each device poll makes once."""
+    if len(data) != 8:
+        return False
+    function, first = data[1], int.from_bytes(data[2:4], 'big')
+    return (function == rtu.READ_HOLDING_REGISTERS and first == MCD_FIRST_REGISTER) or \
+        (function == rtu.READ_COILS and first == COIL_STATUS)
+
+
+def bench_node(line: PacedSimulator, seconds: float) -> Dict[str, float]:
+    """Run the node on the line; return its device polls/s and its wire figures."""
+    node = NodeProcess(node_bus(line.path, line.timing.baudrate), LINE_DEVICES)
+    try:
+        wait_until_ready(list(LINE_DEVICES))
+        wait_for(lambda: False, WARM_UP_S)
+        started_s = time.monotonic()
+        time.sleep(seconds)
+        ended_s = time.monotonic()
+    finally:
+        node.stop()
+    frames = [frame for frame in line.pacer.frames()
+              if started_s <= frame.start_s and frame.end_s <= ended_s]
+    polls = sum(1 for request, _ in transactions(frames)
+                if request.sender == MASTER and is_poll_request(request.data))
+    figures = line.wire_figures(started_s, ended_s)
+    figures['polls'] = polls / (ended_s - started_s)
+    return figures
+
+
+def main() -> None:
+    seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 10.0
+    print(f'4 MCD 500 + 4 FC 51, fast data only, 8E1 timing through the wire pacer, '
+          f'{seconds:g} s per case; pymodbus {PYMODBUS_VERSION} for the naive loop')
+    print(' baud  naive sets/s  node sets/s  ratio  node tx/s  wire limit/s  fraction')
+    rclpy.init()
+    try:
+        for baudrate in (9600, 19200):
+            timing = LineTiming(baudrate, 'E', 1)
+            line = PacedSimulator(simulator_devices(LINE_DEVICES), timing)
+            try:
+                naive, failures = bench_naive(line, seconds)
+                node = bench_node(line, seconds)
+            finally:
+                line.close()
+            print(f'{baudrate:5d}  {naive:12.1f}  {node["polls"]:11.1f}  '
+                  f'{node["polls"] / naive:5.2f}x  {node["rate"]:9.1f}  {node["limit"]:12.1f}  '
+                  f'{node["fraction"]:8.1%}' +
+                  (f'  (naive: {failures} failed requests)' if failures else ''))
+    finally:
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
