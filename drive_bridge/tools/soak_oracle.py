@@ -605,8 +605,11 @@ class Oracle:
         """Return '' if the device executed the command's writes before its answer."""
         count = len(expected)
         if self.exact:
+            # The line's last requests before the answer; only if they are not the command's
+            # writes, the ones just after (taken late by a held-up simulator). Two identical
+            # commands back to back must not trade frames: the first window that fits wins.
             last = request.answered_seq
-            for shift in range(1, self.slack + 1):  # taken late by a held-up simulator
+            for shift in range(self.slack + 1):
                 later = list(self.frames[max(0, last + shift - count):last + shift])
                 if len(later) == count and all(self._is_write(frame, device, labels)
                                                for frame, labels in zip(later, expected)):

@@ -563,8 +563,16 @@ def test_the_node_prints_usage_for_help():
 
 # -- processes: Ctrl-C, progress on a terminal, exclusive ports -----------------------------
 def cli_process(*argv, **kwargs):
+    """Start drive-bridge with Ctrl-C at its default, as on a terminal (see below)."""
     return subprocess.Popen([sys.executable, '-m', 'drive_bridge.tools.cli',
-                             *[str(arg) for arg in argv]], **kwargs)
+                             *[str(arg) for arg in argv]], preexec_fn=_terminal_signals,
+                            **kwargs)
+
+
+def _terminal_signals() -> None:
+    # A test run started as a background job of a non-interactive shell (CI) has SIGINT
+    # ignored, and its children inherit that: Python then installs no KeyboardInterrupt.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def test_a_second_opener_gets_one_line_naming_the_owner_and_ctrl_c_exits_130(line, capsys):
