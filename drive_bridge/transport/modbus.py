@@ -223,7 +223,7 @@ class ModbusTransport(Transport):
         A device answers once and falls silent; bytes in each of a few pauses after the
         transaction ended mean something else is talking. What arrives is dropped.
         """
-        port = getattr(self._client, 'socket', None) if self.settings.is_serial else None
+        port = self._open_serial_port()
         if port is None:
             return False
         try:
@@ -236,6 +236,19 @@ class ModbusTransport(Transport):
         except PORT_ERRORS:
             return False
         return True
+
+    def _open_serial_port(self):
+        """Return the client's serial port, reopened if pymodbus closed it (None: TCP)."""
+        if not self.settings.is_serial:
+            return None
+        port = getattr(self._client, 'socket', None)
+        if port is None:  # pymodbus 3.6 closes the port after a reply it cannot decode
+            try:
+                self._client.connect()
+            except PORT_ERRORS:
+                return None
+            port = getattr(self._client, 'socket', None)
+        return port
 
     def _classify_io_error(self, text: str):
         if port_missing(self.settings):
