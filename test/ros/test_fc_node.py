@@ -17,7 +17,8 @@ DEVICES = {
 @pytest.fixture(scope='module')
 def sim():
     with serving(make_sim_server({1: 'fc51', 20: 'mcd500'},
-                                 settings={'fc': {'ramp_up_s': 1.0, 'ramp_down_s': 1.0,
+                                 # 1.2 s to 40 %: polls see 'starting' on a loaded machine too
+                                 settings={'fc': {'ramp_up_s': 3.0, 'ramp_down_s': 1.0,
                                                   'quick_stop_ramp_s': 0.3}})) as server:
         yield server
 
