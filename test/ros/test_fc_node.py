@@ -17,8 +17,9 @@ DEVICES = {
 @pytest.fixture(scope='module')
 def sim():
     with serving(make_sim_server({1: 'fc51', 20: 'mcd500'},
-                                 # 1.2 s to 40 %: polls see 'starting' on a loaded machine too
-                                 settings={'fc': {'ramp_up_s': 3.0, 'ramp_down_s': 1.0,
+                                 # 4 s to 40 %: 'starting' is seen even when a loaded machine
+                                 # holds this process's simulator thread up for a second
+                                 settings={'fc': {'ramp_up_s': 10.0, 'ramp_down_s': 1.0,
                                                   'quick_stop_ramp_s': 0.3}})) as server:
         yield server
 
