@@ -236,7 +236,9 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         status = StatusWord(status_word)
         if not commanded_run:
             self.reached_reference = False
-        elif status.flag(fc_control.STW_ON_REFERENCE):
+        elif status.flag(fc_control.STW_RUNNING) and status.flag(fc_control.STW_ON_REFERENCE):
+            # Running on reference: a drive that has not started yet reads "on reference"
+            # too (stopped at its output), which must not end 'starting' before it began.
             self.reached_reference = True
         reading = DeviceReading(
             state=status.state(commanded_run, self.reached_reference),

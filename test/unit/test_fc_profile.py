@@ -343,3 +343,13 @@ def test_sim_answers_coils_registers_and_exceptions():
     assert device.handle(rtu.RtuFrame(1, 0x2B, b'\x0e\x01\x00'), 0.0).data == bytes([1])
     with pytest.raises(ParameterError):
         device.model.write_parameter(804, [9], 0.0)
+
+
+def test_a_start_read_before_the_drive_moves_is_still_starting_once_it_ramps():
+    """A stopped drive reads "on reference" too: that must not end 'starting' before it began."""
+    profile = DriveProfile(fc.DATA, 'fc51')
+    started = FixedControl(Command.START, profile.reference_word(40.0))
+    assert profile.reading(0x0703, 0, started).state == 'ready'  # start acknowledged, not yet
+    assert profile.reading(0x0E07, 0x0400, started).state == 'starting'  # ramping
+    assert profile.reading(0x0F07, 0x1999, started).state == 'running'  # on reference
+    assert profile.reading(0x0E07, 0x1800, started).state == 'running'  # a later change
