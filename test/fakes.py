@@ -59,3 +59,31 @@ os.write(_READABLE[1], b'x')  # never read: select always finds it readable
 def always_readable_fd() -> int:
     """Return a file descriptor that select always reports readable (for fake ports)."""
     return _READABLE[0]
+
+
+class ScriptedPort:
+    """A serial port whose wire holds ``reply`` bytes, all there at once (for transports)."""
+
+    def __init__(self, reply: bytes):
+        self.reply = reply
+        self.timeout = 0.0
+
+    def reset_input_buffer(self):
+        pass
+
+    def write(self, data):
+        return len(data)
+
+    def read(self, count):
+        chunk, self.reply = self.reply[:count], self.reply[count:]
+        return chunk
+
+    @property
+    def in_waiting(self):
+        return len(self.reply)
+
+    def fileno(self):
+        return always_readable_fd()
+
+    def close(self):
+        pass

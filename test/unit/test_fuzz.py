@@ -24,7 +24,7 @@ from drive_bridge.sim.mcd_model import McdModel, McdSimConfig
 from drive_bridge.transport.ap_ascii import ApAsciiTransport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
-from fakes import always_readable_fd, drive_cycle
+from fakes import drive_cycle, ScriptedPort
 from hypothesis import given, HealthCheck, settings, strategies as st
 
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
@@ -99,38 +99,10 @@ def test_response_decoder_reads_a_reply_arriving_in_pieces(case, data):
     assert result.frame is not None and result.frame.encode() == reply
 
 
-class RandomPort:
-    """A serial port whose reply is whatever bytes the test gives it."""
-
-    def __init__(self, reply: bytes):
-        self.reply = reply
-        self.timeout = 0.0
-
-    def reset_input_buffer(self):
-        pass
-
-    def write(self, data):
-        return len(data)
-
-    def read(self, count):
-        chunk, self.reply = self.reply[:count], self.reply[count:]
-        return chunk
-
-    @property
-    def in_waiting(self):
-        return len(self.reply)
-
-    def fileno(self):
-        return always_readable_fd()
-
-    def close(self):
-        pass
-
-
 def _transport(kind, reply: bytes):
     settings_ = LinkSettings(protocol='modbus_rtu', port='/dev/null', timeout_s=0.001)
-    transport = kind(settings_, open_port=lambda *args, **kwargs: RandomPort(reply))
-    transport._port = RandomPort(reply)
+    transport = kind(settings_, open_port=lambda *args, **kwargs: ScriptedPort(reply))
+    transport._port = ScriptedPort(reply)
     return transport
 
 

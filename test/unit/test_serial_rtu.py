@@ -5,35 +5,8 @@ from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
-from fakes import always_readable_fd
+from fakes import ScriptedPort
 import pytest
-
-
-class ScriptedPort:
-    """A serial port whose wire holds ``reply`` bytes (all there at once)."""
-
-    def __init__(self, reply: bytes):
-        self.reply = reply
-
-    def reset_input_buffer(self):
-        pass
-
-    def write(self, data):
-        return len(data)
-
-    def read(self, count):
-        chunk, self.reply = self.reply[:count], self.reply[count:]
-        return chunk
-
-    @property
-    def in_waiting(self):
-        return len(self.reply)
-
-    def fileno(self):
-        return always_readable_fd()
-
-    def close(self):
-        pass
 
 
 def transport_with(reply: bytes) -> RtuSerialTransport:
