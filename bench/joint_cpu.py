@@ -23,18 +23,16 @@ the range. Run: .venv/bin/python bench/joint_cpu.py [window s] [baud] [runs]
 import json
 import math
 import os
-import signal
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from typing import Dict, List, Optional
 
-from drive_bridge.config import write_params_file
 from drive_bridge.sim.wire_pacer import LineTiming
 from node_cpu import cpu_ticks, TICKS_PER_S, wait_until_ready
-from paced_line import node_bus, PacedSimulator, ros_environment, simulator_devices, wait_for
+from paced_line import (
+    node_bus, NodeProcess, PacedSimulator, ros_environment, simulator_devices, wait_for)
 
 ros_environment()
 import rclpy  # noqa: E402 - after the environment it reads
@@ -59,30 +57,6 @@ def devices(joints: bool) -> Dict[str, Dict]:
             block['velocity_scale'] = SCALE
         blocks[f'wheel{unit}'] = block
     return blocks
-
-
-class Node:
-    """drive_bridge_node in a subprocess, optionally with batched joint states."""
-
-    def __init__(self, bus: Dict, blocks: Dict[str, Dict], batch: bool):
-        self.directory = tempfile.TemporaryDirectory(prefix='drive_bridge_joint_cpu_')
-        params = write_params_file(os.path.join(self.directory.name, 'bus.yaml'), bus, blocks)
-        self.log = open(os.path.join(self.directory.name, 'node.log'), 'w+')
-        self.process = subprocess.Popen(
-            [sys.executable, '-c', NODE_MAIN.format(batch=batch), '--ros-args',
-             '--params-file', params], env=dict(os.environ), stdout=self.log,
-            stderr=self.log, text=True)
-
-    def stop(self) -> None:
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-        try:
-            self.process.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait()
-        self.log.close()
-        self.directory.cleanup()
 
 
 def start_drives(names: List[str]) -> None:
@@ -142,7 +116,8 @@ def run_case(label: str, baudrate: int, window_s: float, joints: bool, client: O
     """Measure one case; return its figures."""
     blocks = devices(joints)
     line = PacedSimulator(simulator_devices(blocks), LineTiming(baudrate, 'E', 1))
-    node = Node(node_bus(line.path, baudrate), blocks, batch)
+    node = NodeProcess(node_bus(line.path, baudrate), blocks,
+                       main=('-c', NODE_MAIN.format(batch=batch)))
     helper = None
     try:
         wait_until_ready(list(blocks))

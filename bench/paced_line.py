@@ -80,13 +80,15 @@ class PacedSimulator:
 class NodeProcess:
     """``drive_bridge_node`` in a subprocess with a params file for ``bus`` and ``devices``."""
 
-    def __init__(self, bus: Dict, devices: Dict[str, Dict]):
+    def __init__(self, bus: Dict, devices: Dict[str, Dict],
+                 main: Sequence[str] = ('-m', 'drive_bridge.ros.entry')):
+        """Start the node; ``main``: the interpreter arguments that run it."""
         self.directory = tempfile.TemporaryDirectory(prefix='drive_bridge_bench_')
         params = write_params_file(os.path.join(self.directory.name, 'bus.yaml'), bus, devices)
         self.log = open(os.path.join(self.directory.name, 'node.log'), 'w+')
         self.process = subprocess.Popen(
-            [sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args', '--params-file',
-             params], env=dict(os.environ), stdout=self.log, stderr=self.log, text=True)
+            [sys.executable, *main, '--ros-args', '--params-file', params],
+            env=dict(os.environ), stdout=self.log, stderr=self.log, text=True)
 
     @property
     def pid(self) -> int:
