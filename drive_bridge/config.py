@@ -407,6 +407,28 @@ def duplicate_key_loader():
     return UniqueKeyLoader
 
 
+def load_yaml_file(path: str, label: str) -> Any:
+    """
+    Return the content of the YAML file ``path``, refusing a key given twice.
+
+    Raises ConfigError in one line naming the file as ``label`` if it cannot be read, is not
+    YAML, or has a key twice (with both lines).
+    """
+    import yaml
+    try:
+        with open(path) as stream:
+            return yaml.load(stream, Loader=duplicate_key_loader())
+    except OSError as error:
+        raise ConfigError(f'cannot read {label}: {error.strerror}') from None
+    except ConfigError as error:
+        raise ConfigError(f'{label}: {error}') from None
+    except yaml.YAMLError as error:
+        where = getattr(error, 'problem_mark', None)
+        line = f' at line {where.line + 1}' if where is not None else ''
+        raise ConfigError(f'{label} is not valid YAML{line}: '
+                          f'{getattr(error, "problem", None) or error}') from None
+
+
 def load_params_file(path: str) -> Dict[str, Dict[str, Any]]:
     """
     Return the node blocks of a ROS 2 parameters file: node key to ros__parameters.
@@ -416,19 +438,7 @@ def load_params_file(path: str) -> Dict[str, Dict[str, Any]]:
     key) holding ``ros__parameters``, and the nested form of the ROS 2 docs
     (``line1:`` / ``drive_bridge:`` / ``ros__parameters:``), whose key is ``/line1/drive_bridge``.
     """
-    import yaml
-    try:
-        with open(path) as stream:
-            content = yaml.load(stream, Loader=duplicate_key_loader())
-    except OSError as error:
-        raise ConfigError(f'cannot read the parameters file {path}: {error.strerror}') from None
-    except ConfigError as error:
-        raise ConfigError(f'the parameters file {path}: {error}') from None
-    except yaml.YAMLError as error:
-        where = getattr(error, 'problem_mark', None)
-        line = f' at line {where.line + 1}' if where is not None else ''
-        raise ConfigError(f'the parameters file {path} is not valid YAML{line}: '
-                          f'{getattr(error, "problem", None) or error}') from None
+    content = load_yaml_file(path, f'the parameters file {path}')
     blocks: Dict[str, Dict[str, Any]] = {}
     if isinstance(content, dict):
         _collect_blocks(content, [], blocks)

@@ -97,19 +97,10 @@ def write(path: str, content: Dict[str, Any]) -> None:
 # -- reading --------------------------------------------------------------------------------
 def load(path: str) -> Backup:
     """Return the backup in ``path``; raise BackupError in one line if it is not one."""
-    import yaml
     try:
-        with open(path) as stream:
-            content = yaml.load(stream, Loader=cfg.duplicate_key_loader())
-    except OSError as error:
-        raise BackupError(f'cannot read {path}: {error.strerror}') from None
-    except ConfigError as error:  # a key given twice
-        raise BackupError(f'{path}: {error}') from None
-    except yaml.YAMLError as error:
-        mark = getattr(error, 'problem_mark', None)
-        line = f' at line {mark.line + 1}' if mark is not None else ''
-        raise BackupError(f'{path} is not valid YAML{line}: '
-                          f'{getattr(error, "problem", None) or error}') from None
+        content = cfg.load_yaml_file(path, str(path))
+    except ConfigError as error:
+        raise BackupError(str(error)) from None
     if not isinstance(content, dict) or 'parameters' not in content:
         raise BackupError(f'{path} is not a drive-bridge backup (it has no parameters)')
     unknown = [str(key) for key in content if key not in TOP_KEYS]
