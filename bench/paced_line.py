@@ -31,7 +31,13 @@ def ros_environment() -> None:
 
 
 class PacedSimulator:
-    """``drive_bridge_sim`` serving ``devices`` (MODEL:ADDRESS) behind a pacer at ``path``."""
+    """
+    ``drive_bridge_sim`` serving ``devices`` (MODEL:ADDRESS) behind a pacer at ``path``.
+
+    The pacer's slave is ideal (its reply goes on the wire exactly one gap after the request):
+    the wire limit assumes no processing time in the slave, so the figures measure the master,
+    not the simulator's process behind its pty.
+    """
 
     def __init__(self, devices: Sequence[str], timing: LineTiming, protocol: str = 'modbus'):
         self.timing = timing
@@ -41,7 +47,7 @@ class PacedSimulator:
         self.process = subprocess.Popen(command, stdin=subprocess.DEVNULL,
                                         stdout=subprocess.PIPE, text=True)
         pty_path = self._wait_for_pty()
-        self.pacer = WirePacer(timing)
+        self.pacer = WirePacer(timing, ideal_slave=True)  # the simulator's time not counted
         self.path = self.pacer.open_pty(pty_path)
         self.pacer.start()
 

@@ -20,6 +20,12 @@ the given baud rate, parity and stop bits:
   simulator that answers at once still keeps the gap; the master side gets bytes as they
   leave the wire, as from a UART, and reads by length. A master that breaks the gap loses
   the transaction; it never gains time.
+- ``ideal_slave`` (the benches): the slave gets bytes as they leave the wire, as the master
+  does (the simulator frames requests by length), and a reply it writes goes on the wire
+  exactly 3.5 characters after the request, however soon it was written: a slave with no
+  processing time of its own (as long as it answers within the gap), which is what the wire
+  limit assumes, so that a bench measures the master and not the simulator's process. The
+  master is held to the gap as before.
 
 Without the gap rule (AP ASCII, the FC protocol: byte streams) both sides get bytes as they
 leave the wire. The pacer keeps a bounded log of the frames on the wire (sender, start and end
@@ -195,7 +201,8 @@ class WireLine:
     seconds of one monotonic clock, passed in; nothing here reads a clock or sleeps.
     """
 
-    def __init__(self, timing: LineTiming, log_size: int = DEFAULT_LOG_SIZE):
+    def __init__(self, timing: LineTiming, log_size: int = DEFAULT_LOG_SIZE,
+                 ideal_slave: bool = False):
         self.timing = timing
         self.counters = LineCounters()
         self._log: Deque[_Frame] = deque(maxlen=log_size)
@@ -203,7 +210,11 @@ class WireLine:
         self._latest: Optional[_Frame] = None  # the frame that started last on the wire
         self._pending: Dict[str, Deque[_Frame]] = {side: deque() for side in SENDERS}
         # With the gap rule the slave is an RTU slave: it takes a frame after the silence.
-        self._frame_receivers = {SLAVE} if timing.gap_rule else set()
+        # An ideal slave instead gets bytes as they leave the wire (it frames by length) and
+        # its reply goes on the wire exactly when the gap allows, however soon it is written.
+        ideal = ideal_slave and timing.gap_rule
+        self._frame_receivers = {SLAVE} if timing.gap_rule and not ideal else set()
+        self._gap_keepers = {SLAVE} if ideal else set()
 
     # -- sending ------------------------------------------------------------------------
     def transmit(self, sender: str, data: bytes, now_s: float) -> None:
@@ -211,6 +222,7 @@ class WireLine:
         if sender not in SENDERS:
             raise ValueError(f'sender must be {MASTER} or {SLAVE}, not {sender!r}')
         char_s = self.timing.char_s
+        now_s = self._held_for_gap(sender, now_s)
         for byte in data:
             current = self._current[sender]
             start_s = now_s if current is None else max(now_s, current.end_s)
@@ -218,6 +230,15 @@ class WireLine:
             frame.add(byte, start_s + char_s)
             self._check_collision(frame, start_s, start_s + char_s)
         self.counters.bytes_sent[sender] += len(data)
+
+    def _held_for_gap(self, sender: str, now_s: float) -> float:
+        """Return when an ideal slave's bytes written at ``now_s`` may go on the wire."""
+        latest = self._latest
+        if sender not in self._gap_keepers or latest is None:
+            return now_s
+        if latest is self._current[sender] and now_s <= latest.end_s + self.timing.inner_gap_s:
+            return now_s  # more of the frame it is sending
+        return max(now_s, latest.end_s + self.timing.gap_s)
 
     def _frame_for(self, sender: str, start_s: float) -> _Frame:
         """Return the frame a byte of ``sender`` starting at ``start_s`` belongs to."""
@@ -349,14 +370,15 @@ class WirePacer:
     """
 
     def __init__(self, timing: LineTiming, log_size: int = DEFAULT_LOG_SIZE,
-                 batch_s: float = 0.002, clock: Callable[[], float] = time.monotonic):
+                 batch_s: float = 0.002, clock: Callable[[], float] = time.monotonic,
+                 ideal_slave: bool = False):
         self.timing = timing
         self.batch_s = batch_s
         self.clock = clock
         self.path = ''
         self.overflow_bytes = 0  # bytes a side's pty would not take (its buffer was full)
         self.lost_sides: List[str] = []  # sides whose port closed under the pacer
-        self._line = WireLine(timing, log_size)
+        self._line = WireLine(timing, log_size, ideal_slave)
         self._lock = threading.Lock()
         self._fds: Dict[str, int] = {}
         self._pty: Optional[PtyLink] = None

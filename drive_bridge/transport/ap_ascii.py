@@ -80,7 +80,7 @@ class ApAsciiTransport(SerialPortTransport):
 
     def _send(self, fragment: bytes) -> None:
         self._port.reset_input_buffer()
-        self._port.write(fragment)
+        self._write(fragment, time.monotonic() + self.settings.timeout_s)
 
     def _expect_ack(self, what: str) -> None:
         reply = self._receive()

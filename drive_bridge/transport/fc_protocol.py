@@ -75,8 +75,8 @@ class FcProtocolTransport(SerialPortTransport):
         port = self._port
         port.reset_input_buffer()  # a late reply to an earlier telegram must not count
         encoded = telegram.encode()
-        port.write(encoded)
         deadline = time.monotonic() + self.settings.timeout_s
+        self._write(encoded, deadline)
         if self.settings.local_echo:
             echo = self._read(len(encoded), deadline)
             if echo != encoded:

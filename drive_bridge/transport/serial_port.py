@@ -10,7 +10,7 @@ import errno
 import os
 import select
 import time
-from typing import Callable
+from typing import Callable, Optional
 
 from drive_bridge.errors import LineBabble, LinkDown
 from drive_bridge.transport.base import Transport
@@ -41,6 +41,23 @@ def lock_refused(error: Exception) -> bool:
         getattr(error, 'errno', None) in (errno.EAGAIN, errno.EWOULDBLOCK)
 
 
+def direct_descriptor(port) -> Optional[int]:
+    """Return the descriptor to read ``port`` by, if it is a plain local POSIX port."""
+    if os.name != 'posix' or type(port) is not serial.Serial:  # not a URL handler's class
+        return None
+    fd = port.fileno()
+    os.set_blocking(fd, False)  # as pyserial opens it: a read returns what is there
+    return fd
+
+
+def _read_ready(fd: int, count: int) -> bytes:
+    """Return up to ``count`` bytes that are there (a tty with VMIN 0 returns none)."""
+    try:
+        return os.read(fd, count)
+    except BlockingIOError:
+        return b''
+
+
 class SerialPortTransport(Transport):
     """Own one pyserial port (device path or URL such as ``socket://``); subclasses talk."""
 
@@ -49,6 +66,7 @@ class SerialPortTransport(Transport):
         super().__init__(settings)
         self._open_port = open_port
         self._port = None
+        self._fd: Optional[int] = None  # a local POSIX port's descriptor, read directly
 
     @property
     def connected(self) -> bool:
@@ -78,10 +96,11 @@ class SerialPortTransport(Transport):
                 raise LinkDown(f'bus offline: {in_use_text(settings.port)}') from error
             raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}'
                            + open_hint(settings)) from error
+        self._fd = direct_descriptor(self._port)
 
     def close(self) -> None:
         """Close the port (idempotent)."""
-        port, self._port = self._port, None
+        port, self._port, self._fd = self._port, None, None
         if port is not None:
             try:
                 port.close()
@@ -98,6 +117,23 @@ class SerialPortTransport(Transport):
         if port_missing(self.settings):
             return LinkDown(f'bus offline: {self.settings.port} not found')
         return LinkDown(f'bus offline: {self.settings.describe()}: {error}')
+
+    def _write(self, data: bytes, deadline: float) -> None:
+        """Write ``data`` whole; on a local POSIX port straight to its descriptor."""
+        if self._fd is None:
+            self._port.write(data)
+            return
+        fd, view = self._fd, memoryview(data)
+        while view:
+            try:
+                view = view[os.write(fd, view):]
+                continue
+            except BlockingIOError:
+                pass
+            _, ready, _ = select.select([], [fd], [], max(0.0, deadline - time.monotonic()))
+            if not ready:  # pyserial would wait for ever
+                raise serial.SerialTimeoutException('the port takes no more bytes (write '
+                                                    'timeout)')
 
     def _read(self, count: int, deadline: float) -> bytes:
         """Read up to ``count`` bytes; return early only when the deadline passes."""
@@ -118,6 +154,8 @@ class SerialPortTransport(Transport):
         changes the port's timeout (pyserial reconfigures the port on every change) and one
         select is the only wake-up while nothing arrives.
         """
+        if self._fd is not None:
+            return self._read_descriptor(count, timeout_s)
         port = self._port
         if not port.in_waiting:
             if timeout_s <= 0:
@@ -126,6 +164,27 @@ class SerialPortTransport(Transport):
             if not ready:
                 return b''
         return port.read(count)
+
+    def _read_descriptor(self, count: int, timeout_s: float) -> bytes:
+        """
+        :meth:`_read_some` on a local POSIX port: ``os.read`` on its non-blocking descriptor.
+
+        pyserial's ``read`` costs a ``select`` and its timeout bookkeeping on every call, even
+        when the bytes are there; this is the bus thread's most frequent call.
+        """
+        fd = self._fd
+        data = _read_ready(fd, count)
+        if data or timeout_s <= 0:
+            return data
+        ready, _, _ = select.select([fd], [], [], timeout_s)
+        if not ready:
+            return b''
+        data = _read_ready(fd, count)
+        if not data:  # readable but nothing: the adapter is gone (pyserial's words for it)
+            raise serial.SerialException('device reports readiness to read but returned no '
+                                         'data (device disconnected or multiple access on '
+                                         'port?)')
+        return data
 
     def _await_bytes(self, count: int, char_s: float, deadline: float) -> None:
         """

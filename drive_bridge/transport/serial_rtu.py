@@ -48,7 +48,7 @@ class RtuSerialTransport(SerialPortTransport):
         port.reset_input_buffer()  # a late reply to an earlier request must not count
         encoded = frame.encode()
         deadline = time.monotonic() + self.settings.timeout_s
-        port.write(encoded)
+        self._write(encoded, deadline)
         if self.settings.local_echo:
             echo = self._read(len(encoded), deadline)
             if echo != encoded:
@@ -67,6 +67,7 @@ class RtuSerialTransport(SerialPortTransport):
         if not buffer:
             raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
         self._await_bytes(expected - 1, self._char_s, deadline)
+        awaited = expected  # bytes whose wire time was waited for since the first one
         needed = rtu.MIN_RESPONSE_BYTES
         while True:
             buffer += self._read(needed - len(buffer), deadline)
@@ -85,7 +86,7 @@ class RtuSerialTransport(SerialPortTransport):
                                          f'within {self.settings.timeout_s:g} s')
                     self.last_recovered['late_reply'] = \
                         self.last_recovered.get('late_reply', 0) + 1
-                    needed = rtu.MIN_RESPONSE_BYTES
+                    needed, awaited = rtu.MIN_RESPONSE_BYTES, 0
                     continue
                 result = rtu.decode_response(buffer, unit, function)
             if result.error:
@@ -97,7 +98,9 @@ class RtuSerialTransport(SerialPortTransport):
                 raise TruncatedFrame(f'truncated reply: {len(buffer)} of {needed} bytes '
                                      f'within {self.settings.timeout_s:g} s')
             needed = result.needed
-            self._await_bytes(needed - len(buffer), self._char_s, deadline)
+            if needed > awaited:  # not slept for yet (a second sleep would wake late)
+                self._await_bytes(needed - len(buffer), self._char_s, deadline)
+                awaited = needed
 
     def _skip_late_reply(self, buffer: bytes, deadline: float) -> Tuple[bool, bytes]:
         """

@@ -1,13 +1,17 @@
 """Both serial engines (native, pymodbus pinned and 3.6.9) against the simulated MCD module."""
 
+import os
 import time
+import tty
 
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.sim.mcd_device import make_mcd_server as make_server
 from drive_bridge.transport.modbus import LinkSettings
 from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
+from drive_bridge.transport.serial_port import direct_descriptor
 import pytest
+import serial
 
 MCD500_PRODUCT = (7 << 3) | 1
 
@@ -127,3 +131,36 @@ def test_even_and_odd_parity_serial_settings_over_socket_url(parity, engine):
         transport.close()
     finally:
         server.stop()
+
+
+def test_native_engine_reads_a_local_port_by_its_descriptor_and_a_url_through_pyserial(
+        sim_bus):
+    local = serial.Serial(sim_bus.pty_path, timeout=0)
+    url = serial.serial_for_url('loop://', timeout=0)
+    try:
+        assert direct_descriptor(local) == local.fileno()
+        assert direct_descriptor(url) is None
+    finally:
+        local.close()
+        url.close()
+
+
+def test_a_port_that_takes_no_more_bytes_is_link_down_within_the_timeout():
+    master_fd, slave_fd = os.openpty()
+    tty.setraw(slave_fd)
+    path = os.ttyname(slave_fd)
+    transport = transport_for(LinkSettings(port=path, parity='N', timeout_s=0.3), 'native')
+    try:
+        filler = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        with pytest.raises(BlockingIOError):  # nobody reads the line: its buffer fills up
+            while True:
+                os.write(filler, bytes(4096))
+        started = time.monotonic()
+        with pytest.raises(LinkDown, match='takes no more bytes'):
+            transport.execute(20, ReadRegisters(2, 1))
+        assert time.monotonic() - started < 3.0
+        assert not transport.connected
+    finally:
+        transport.close()
+        for fd in (master_fd, slave_fd, filler):
+            os.close(fd)

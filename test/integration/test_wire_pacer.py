@@ -35,11 +35,11 @@ REPLY_BYTES = 17
 
 
 @contextmanager
-def paced_line(server, timing: LineTiming, link_path: str = ''):
+def paced_line(server, timing: LineTiming, link_path: str = '', ideal_slave: bool = False):
     """Serve ``server`` on a pty behind a pacer; yield the pacer (its pty is for the master)."""
     server.open_pty()
     server.start()
-    pacer = WirePacer(timing)
+    pacer = WirePacer(timing, ideal_slave=ideal_slave)
     try:
         pacer.open_pty(server.pty_path, link_path)
         pacer.start()
@@ -94,12 +94,16 @@ def test_transactions_take_their_wire_time_and_the_log_shows_them():
     assert server.stats.requests == 10
 
 
-def test_a_master_without_the_gap_gets_no_answer():
+IDEAL_SLAVE = pytest.mark.parametrize('ideal_slave', [False, True], ids=['rtu_slave', 'ideal'])
+
+
+@IDEAL_SLAVE
+def test_a_master_without_the_gap_gets_no_answer(ideal_slave):
     # 300 baud: a 128 ms gap, so that even a pacer slowed by a loaded machine sees that the
     # second request follows the reply at once.
     timing = LineTiming(300, 'E', 1)
     server = make_mcd_server({20: 'mcd500'})
-    with paced_line(server, timing) as pacer, \
+    with paced_line(server, timing, ideal_slave=ideal_slave) as pacer, \
             rtu_master(pacer.path, 300, 1.0) as master:
         master.execute(20, ReadRegisters(2, 1))
         with pytest.raises(NoResponse):  # sent the moment the reply was in
@@ -132,9 +136,10 @@ def run_bus(path: str, baudrate: int, gap_s: float, polls: int) -> tuple:
         bus.shutdown(stop_motors=False)
 
 
-def test_a_bus_master_that_skips_the_gap_loses_throughput():
+@IDEAL_SLAVE
+def test_a_bus_master_that_skips_the_gap_loses_throughput(ideal_slave):
     timing = LineTiming(4800, 'E', 1)
-    with paced_line(make_mcd_server({20: 'mcd500'}), timing) as pacer:
+    with paced_line(make_mcd_server({20: 'mcd500'}), timing, ideal_slave=ideal_slave) as pacer:
         kept_s, _ = run_bus(pacer.path, 4800, timing.gap_s, 6)
         assert pacer.counters().gap_violations == 0
         skipped_s, skipped_failures = run_bus(pacer.path, 4800, 0.0, 6)
@@ -144,9 +149,11 @@ def test_a_bus_master_that_skips_the_gap_loses_throughput():
     assert skipped_s > kept_s
 
 
-def test_a_paced_bus_never_beats_the_wire():
+@IDEAL_SLAVE
+def test_a_paced_bus_never_beats_the_wire(ideal_slave):
     timing = LineTiming(19200, 'E', 1)
-    with paced_line(make_mcd_server({20: 'mcd500', 21: 'mcd500'}), timing) as pacer:
+    server = make_mcd_server({20: 'mcd500', 21: 'mcd500'})
+    with paced_line(server, timing, ideal_slave=ideal_slave) as pacer:
         transport = RtuSerialTransport(LinkSettings(port=pacer.path, baudrate=19200,
                                                     parity='N', timeout_s=0.2))
         specs = [DeviceSpec(f'd{unit}', unit, McdProfile('mcd500'), poll_rate_hz=100.0)
@@ -164,6 +171,7 @@ def test_a_paced_bus_never_beats_the_wire():
     fraction = wire_fraction(pairs, timing, ended - min(f.start_s for f in frames) +
                              timing.gap_s)
     assert 0.2 < fraction <= 1.0
+    assert all(reply.start_s - request.end_s >= timing.gap_s - 1e-6 for request, reply in pairs)
 
 
 def test_a_request_sent_while_the_reply_is_on_the_wire_collides():

@@ -257,3 +257,52 @@ def test_the_simulator_pace_option():
     for bad in ('fast', '9600:X', '9600:E:3', '9600:E:1:1', '0'):
         with pytest.raises(SystemExit, match='--pace'):
             parse_pace(bad)
+
+
+# -- the ideal slave of the benches ------------------------------------------------------
+def test_an_ideal_slave_gets_the_request_as_it_leaves_the_wire():
+    line = WireLine(TIMING, ideal_slave=True)
+    line.transmit(MASTER, REQUEST, 0.0)
+    assert received(line, 4 * CHAR_S + EPS)[SLAVE] == REQUEST[:4]
+    assert received(line, 8 * CHAR_S + EPS)[SLAVE] == REQUEST[4:]
+
+
+def test_an_ideal_slaves_early_reply_starts_exactly_one_gap_after_the_request():
+    line = WireLine(TIMING, ideal_slave=True)
+    line.transmit(MASTER, REQUEST, 0.0)
+    request_end_s = 8 * CHAR_S
+    line.transmit(SLAVE, REPLY, request_end_s + 0.0001)  # answered at once
+    request, reply = line.frames()
+    assert reply.start_s == pytest.approx(request_end_s + GAP_S)
+    assert (request.fate, reply.fate) == (OK, OK)
+    assert received(line, reply.start_s + CHAR_S - 1e-6)[MASTER] == b''
+    assert received(line, reply.end_s + EPS)[MASTER] == REPLY
+    assert line.counters.gap_violations == 0
+
+
+def test_an_ideal_slave_answering_late_is_not_moved_and_keeps_its_frame_whole():
+    line = WireLine(TIMING, ideal_slave=True)
+    line.transmit(MASTER, REQUEST, 0.0)
+    line.transmit(SLAVE, REPLY[:5], 0.05)
+    line.transmit(SLAVE, REPLY[5:], 0.05 + 2 * CHAR_S)  # written while its start is on
+    frames = line.frames()
+    assert [frame.sender for frame in frames] == [MASTER, SLAVE]
+    assert frames[1].start_s == 0.05 and frames[1].data == REPLY
+
+
+def test_a_master_that_skips_the_gap_still_loses_against_an_ideal_slave():
+    line = WireLine(TIMING, ideal_slave=True)
+    line.transmit(MASTER, REQUEST, 0.0)
+    line.transmit(SLAVE, REPLY, 8 * CHAR_S)
+    reply_end_s = line.frames()[-1].end_s
+    assert received(line, reply_end_s + EPS)[MASTER] == REPLY
+    line.transmit(MASTER, REQUEST, reply_end_s + CHAR_S)  # 1 of 3.5 characters
+    assert line.frames()[-1].fate == GAP_VIOLATION
+    assert received(line, 1.0)[SLAVE] == b''  # nothing of it reaches the slave
+    # A request glued to the slave's held reply collides with it: both are lost.
+    line = WireLine(TIMING, ideal_slave=True)
+    line.transmit(MASTER, REQUEST, 0.0)
+    line.transmit(SLAVE, REPLY, 8 * CHAR_S)  # held until 8 + 3.5 characters
+    line.transmit(MASTER, REQUEST, 9 * CHAR_S)
+    assert line.counters.collisions == 1
+    assert received(line, 1.0)[MASTER] == b''
