@@ -10,11 +10,13 @@ Each step of :meth:`BusMaster.run_once` is one transaction or none: a waiting jo
 first, then other commands, parameters and set-up writes), else the next step of the poll
 cycle in progress, else the first step of the next device that is due. So a command goes
 on the wire between two transactions of a poll, never later than the one on the wire when
-it arrived. Commands carry a deadline and are never repeated; the motor-state owner decides
-what may be sent (see :mod:`.motor` and the README's "Safety model").
+it arrived: the next step is chosen only :data:`CHOICE_LEAD_S` before the inter-frame gap
+ends, so a command that comes in the gap goes first. Commands carry a deadline and are
+never repeated; the motor-state owner decides what may be sent (see :mod:`.motor` and the
+README's "Safety model").
 
-:meth:`run_once` has no waiting of its own, so unit tests drive it with a fake clock and a
-fake transport; :meth:`start` runs it on a thread.
+:meth:`run_once` has no waiting of its own (it returns how long to wait), so unit tests
+drive it with a fake clock and a fake transport; :meth:`start` runs it on a thread.
 """
 
 from concurrent.futures import Future
@@ -41,6 +43,9 @@ from drive_bridge.protocol.commands import Command
 from drive_bridge.transport.base import Transport
 
 __all__ = ['BusEvent', 'BusMaster', 'BusTiming', 'DeviceSnapshot', 'DeviceSpec']
+
+CHOICE_LEAD_S = 0.0005  # the next frame is chosen this long before the gap ends (its build)
+MIN_WAIT_S = 1e-6  # a shorter wait is none (below any timer's resolution)
 
 
 @dataclass
@@ -434,6 +439,12 @@ class BusMaster:
             if wait_s > 0 or not self._open_link():
                 self._drain_jobs_while_down()
                 return max(self._link.wait_s(self.clock()), 0.001)
+        # What goes next is chosen just before it can go, so that a command that comes in
+        # the gap goes before the poll step that was next (the rest of the gap is slept in
+        # the transaction).
+        choose_in_s = self._runner.gap_left_s(now) - CHOICE_LEAD_S
+        if choose_in_s > MIN_WAIT_S:
+            return choose_in_s
         self._expire_jobs(now)
         self._check_deadmen(now)
         with self._lock:

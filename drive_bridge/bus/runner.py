@@ -32,13 +32,17 @@ class TransactionRunner:
         self.sleep = sleep
         self.last_end_s = -float('inf')
 
+    def gap_left_s(self, now: float) -> float:
+        """Return how much longer the line must stay silent before the next frame."""
+        return self.last_end_s + self.frame_gap_s - now
+
     def transact(self, device: BusDevice, request: Request) -> Any:
         """Run ``request`` with ``device``; raise MonitorOnly for a write it may not get."""
         if request.writes and not device.owner.writes_allowed:
             device.stats.refused_writes += 1
             raise MonitorOnly(f'{device.name} is monitor only (allow_control is false): '
                               f'{request.describe()} not sent')
-        gap_s = self.last_end_s + self.frame_gap_s - self.clock()
+        gap_s = self.gap_left_s(self.clock())
         if gap_s > 0:
             self.sleep(gap_s)
         started = self.clock()

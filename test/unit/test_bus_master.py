@@ -101,6 +101,29 @@ def test_command_goes_before_waiting_polls_and_is_acknowledged():
     assert bus.snapshot('d1').holds_run
 
 
+def test_a_command_that_comes_in_the_frame_gap_goes_before_the_poll_that_was_next():
+    gap_s = 0.004
+    bus, transport, clock, _ = make_bus([1, 2], rates={1: 100.0, 2: 100.0},
+                                        timing=BusTiming(frame_gap_s=gap_s))
+    run_for(bus, clock, 0.5)
+    clock.now += 1.0  # both devices due: the bus is busy
+    logged = len(transport.log)
+    while len(transport.log) == logged:
+        assert bus.run_once() == 0.0  # a poll: the gap starts at its reply's end
+    polled_s = transport.log[-1][0]
+    wait_s = bus.run_once()  # nothing is chosen while the gap runs
+    assert 0 < wait_s <= gap_s and len(transport.log) == logged + 1
+    clock.now += wait_s / 2
+    future = bus.submit_command('d1', 'start')  # comes in the gap
+    run_for(bus, clock, 0.05)
+    assert future.result(timeout=0) == 'start acknowledged by d1 (address 1)'
+    # The start went right after the poll's reply and the gap: before the poll that was next.
+    sent_s, _, request = transport.log[logged + 1]
+    assert request == WriteRegister(1, 1)
+    assert sent_s - polled_s == pytest.approx(RTT_S + gap_s)
+    assert [txn for _, _, txn in transport.log].count(WriteRegister(1, 1)) == 1
+
+
 def test_dead_device_goes_offline_and_costs_one_timeout_per_backoff():
     timing = BusTiming(retries=2, offline_after=3, backoff_initial_s=1.0, backoff_max_s=8.0)
     bus, transport, clock, events = make_bus([1, 2], timing=timing)
