@@ -345,7 +345,9 @@ class BusMaster:
         if self._thread is None or not self._thread.is_alive():
             deadline = self.clock() + timeout_s + self.timing.transaction_timeout_s
             while not future.done() and self.clock() < deadline:
-                self.run_once()
+                wait_s = self.run_once()
+                if wait_s > 0:
+                    self._runner.sleep(min(wait_s, 0.005))
         try:
             return future.result(timeout=timeout_s + 2 * self.timing.transaction_timeout_s)
         except Exception as error:  # noqa: B902 - reported in words, never raised here
