@@ -15,6 +15,11 @@ DEVICES = {
 }
 
 
+def diagnostic_values(device, client):
+    status = client.diagnostics(device)
+    return {kv.key: kv.value for kv in status.values} if status is not None else {}
+
+
 def test_start_reference_trip_reset_and_sigterm_on_the_fc_protocol(tmp_path):
     server = make_fc_protocol_server({1: 'fc51', 2: 'vlt5000'},
                                      {'ramp_up_s': 0.3, 'ramp_down_s': 0.3})
@@ -32,10 +37,11 @@ def test_start_reference_trip_reset_and_sigterm_on_the_fc_protocol(tmp_path):
                                  abs(client.values('conv', 'speed_feedback')[-1] + 20.0) < 0.1)
         assert client.spin_until(lambda: (client.values('conv', 'motor_current') or [0])[-1]
                                  > 0.3)
-        assert client.spin_until(lambda: client.diagnostics('conv') is not None and
-                                 client.diagnostics('conv').level == DiagnosticStatus.OK)
-        values = {kv.key: kv.value for kv in client.diagnostics('conv').values}
-        assert values['link'].endswith('N1') and values['control_image'] == '0x047C'
+        # The latest status may have been built before the start: wait for one built after.
+        assert client.spin_until(lambda: diagnostic_values('conv', client).get(
+            'control_image') == '0x047C')
+        assert client.diagnostics('conv').level == DiagnosticStatus.OK
+        assert diagnostic_values('conv', client)['link'].endswith('N1')
         fan = server.devices[2].model
         with server.lock:
             fan.trip(5, server.clock())
