@@ -25,7 +25,7 @@ from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.sim.wire_pacer import LineTiming
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport, PYMODBUS_VERSION
 from drive_bridge.transport.protocols import make_transport
-from paced_line import PacedSimulator, run_step
+from paced_line import PacedSimulator
 
 UNITS = (20, 21, 22)
 REQUEST_BYTES = 8
@@ -58,13 +58,13 @@ def bench_bus(baudrate: int, seconds: float, engine: str, keep_gap: bool = True)
                     BusTiming(frame_gap_s=gap_s, offline_after=1000))
     bus.run_once()  # connect
     for _ in range(6):  # warm up
-        run_step(bus)
+        bus.run_step()
     before = bus.transaction_count() - errors(bus)
     waits = WaitCounter()
     started, cpu_before = time.monotonic(), time.thread_time()
     with waits:
         while time.monotonic() - started < seconds:
-            run_step(bus)
+            bus.run_step()
     ended, cpu_s = time.monotonic(), time.thread_time() - cpu_before
     done = bus.transaction_count() - errors(bus) - before
     bus.shutdown(stop_motors=False)

@@ -26,7 +26,7 @@ from drive_bridge.sim.wire_pacer import LineTiming, MODBUS_GAP_CHARACTERS, trans
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.modbus import PYMODBUS_VERSION
 from drive_bridge.transport.protocols import make_transport
-from paced_line import PacedSimulator, run_step
+from paced_line import PacedSimulator
 
 READOUT_PERIOD_S = 1.0  # the node's default
 
@@ -59,15 +59,15 @@ def bench(baudrate: int, seconds: float, protocol: str, engine: str = '') -> dic
     bus = make_bus(line, protocol, engine, readings)
     deadline = time.monotonic() + 10.0
     while bus.snapshot('conv').reading is None and time.monotonic() < deadline:
-        run_step(bus)  # connect, identify, first reading
+        bus.run_step()  # connect, identify, first reading
     started = bus.submit_command('conv', 'start')
     while not started.done() and time.monotonic() < deadline:
-        run_step(bus)
+        bus.run_step()
     started.result(timeout=0)  # the bench measures a running drive: fail loudly otherwise
     polls_before = sum(readings)
     started = time.monotonic()
     while time.monotonic() - started < seconds:
-        run_step(bus)
+        bus.run_step()
     ended = time.monotonic()
     polls = sum(readings) - polls_before
     bus.shutdown(stop_motors=False)

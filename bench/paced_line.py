@@ -30,13 +30,6 @@ def ros_environment() -> None:
                           os.path.join(TEST_DIR, 'fastdds_test_profile.xml'))
 
 
-def run_step(bus) -> None:
-    """Run one step of ``bus`` and wait what it asks, as the bus thread does."""
-    wait_s = bus.run_once()
-    if wait_s > 0:
-        time.sleep(wait_s)
-
-
 class PacedSimulator:
     """
     ``drive_bridge_sim`` serving ``devices`` (MODEL:ADDRESS) behind a pacer at ``path``.

@@ -345,9 +345,7 @@ class BusMaster:
         if self._thread is None or not self._thread.is_alive():
             deadline = self.clock() + timeout_s + self.timing.transaction_timeout_s
             while not future.done() and self.clock() < deadline:
-                wait_s = self.run_once()
-                if wait_s > 0:
-                    self._runner.sleep(min(wait_s, 0.005))
+                self.run_step(max_wait_s=0.005)
         try:
             return future.result(timeout=timeout_s + 2 * self.timing.transaction_timeout_s)
         except Exception as error:  # noqa: B902 - reported in words, never raised here
@@ -433,6 +431,18 @@ class BusMaster:
         return outcomes
 
     # -- one scheduling step ------------------------------------------------------------
+    def run_step(self, max_wait_s: float = math.inf) -> float:
+        """
+        Do the next piece of bus work, then wait what it asks (at most ``max_wait_s``).
+
+        For callers that drive the bus without its thread (stop_all, the soak, the benches):
+        the wait is the master's ``sleep``, so a fake clock moves. Returns the wait asked.
+        """
+        wait_s = self.run_once()
+        if wait_s > 0:
+            self._runner.sleep(min(wait_s, max_wait_s))
+        return wait_s
+
     def run_once(self) -> float:
         """Do the next piece of bus work; return how long to wait before the next one."""
         now = self.clock()

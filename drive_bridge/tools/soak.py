@@ -471,9 +471,7 @@ class SoakRun:
         """Run the bus (no random driver) for ``seconds`` of line time, or until ``until()``."""
         end = self.clock() + seconds
         while self.clock() < end and not (until is not None and until()):
-            wait_s = self.run_once()
-            if wait_s > 0:
-                self.sleep(min(wait_s, 0.005))
+            self.step()
 
     def check(self, final_states: Optional[Dict[str, str]] = None) -> List[Violation]:
         """Return the oracle's violations of the run so far."""
@@ -486,14 +484,14 @@ class SoakRun:
         else:
             time.sleep(seconds)
 
-    def run_once(self) -> float:
-        """Run one step of the bus; count a crash."""
+    def step(self) -> None:
+        """Run one step of the bus and wait what it asks (5 ms at most); count a crash."""
         try:
-            return self.master.run_once()
+            self.master.run_step(max_wait_s=0.005)
         except Exception as error:  # noqa: B902 - a crash is what the soak counts
             self.report.crashes += 1
             self.report.crash_texts.append(f'{type(error).__name__}: {error}')
-            return 0.01
+            self.sleep(0.005)
 
     def loop(self, progress: Optional[Callable[[int], None]]) -> None:
         """Drive the bus at random until the settings' transactions are done."""
@@ -514,9 +512,7 @@ class SoakRun:
                     return
             self.disturbances.step()
             self.driver.step()
-            wait_s = self.run_once()
-            if wait_s > 0:
-                self.sleep(min(wait_s, 0.005))
+            self.step()
 
     def shut_down(self) -> Dict[str, str]:
         """End the disturbances and the faults, stop everything; return what still runs."""
@@ -527,9 +523,7 @@ class SoakRun:
         future = self.master.begin_stop_all('soak end', timeout_s=5.0)
         deadline = self.clock() + 6.0
         while not future.done() and self.clock() < deadline:
-            wait_s = self.run_once()
-            if wait_s > 0:
-                self.sleep(min(wait_s, 0.005))
+            self.step()
         return running_motors(self.server)
 
     def oracle(self) -> Oracle:

@@ -117,13 +117,6 @@ def test_a_master_without_the_gap_gets_no_answer(ideal_slave):
     assert server.stats.requests == 2  # the glued request never reached the slave
 
 
-def run_step(bus: BusMaster) -> None:
-    """Run one step of ``bus`` and wait what it asks, as the bus thread does."""
-    wait_s = bus.run_once()
-    if wait_s > 0:
-        time.sleep(wait_s)
-
-
 def run_bus(path: str, baudrate: int, gap_s: float, polls: int) -> tuple:
     """Poll one MCD until ``polls`` polls succeeded; return (seconds, failed transactions)."""
     transport = RtuSerialTransport(LinkSettings(port=path, baudrate=baudrate, parity='N',
@@ -134,7 +127,7 @@ def run_bus(path: str, baudrate: int, gap_s: float, polls: int) -> tuple:
     started = time.monotonic()
     try:
         while True:
-            run_step(bus)
+            bus.run_step()
             stats = bus.snapshot('soft').stats
             failed = int(stats['errors'])
             if int(stats['transactions']) - failed >= polls:
@@ -169,7 +162,7 @@ def test_a_paced_bus_never_beats_the_wire(ideal_slave):
         bus.run_once()
         started = time.monotonic()
         while time.monotonic() - started < 1.0:
-            run_step(bus)
+            bus.run_step()
         bus.shutdown(stop_motors=False)
         frames = [frame for frame in pacer.frames() if frame.start_s >= started]
     ended = max(frame.end_s for frame in frames)
