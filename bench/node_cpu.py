@@ -32,11 +32,16 @@ WARM_UP_S = 2.0
 TICKS_PER_S = os.sysconf('SC_CLK_TCK')
 
 
-def cpu_ticks(stat_path: str) -> int:
-    """Return utime + stime of a process or thread, in clock ticks."""
+def cpu_split(stat_path: str) -> Tuple[int, int]:
+    """Return (utime, stime) of a process or thread, in clock ticks."""
     with open(stat_path) as stream:
         fields = stream.read().rsplit(')', 1)[1].split()
-    return int(fields[11]) + int(fields[12])  # fields 14 and 15 of proc(5)
+    return int(fields[11]), int(fields[12])  # fields 14 and 15 of proc(5)
+
+
+def cpu_ticks(stat_path: str) -> int:
+    """Return utime + stime of a process or thread, in clock ticks."""
+    return sum(cpu_split(stat_path))
 
 
 def thread_ticks(pid: int) -> Dict[int, Tuple[str, int]]:
@@ -80,10 +85,10 @@ def main() -> None:
         wait_until_ready(list(LINE_DEVICES))
         wait_for(lambda: False, WARM_UP_S)
         started_s = time.monotonic()
-        process_before = cpu_ticks(f'/proc/{node.pid}/stat')
+        process_before = cpu_split(f'/proc/{node.pid}/stat')
         threads_before = thread_ticks(node.pid)
         time.sleep(window_s)
-        process_after = cpu_ticks(f'/proc/{node.pid}/stat')
+        process_after = cpu_split(f'/proc/{node.pid}/stat')
         threads_after = thread_ticks(node.pid)
         ended_s = time.monotonic()
         wire = line.wire_figures(started_s, ended_s)
@@ -99,7 +104,9 @@ def main() -> None:
 
     print(f'drive_bridge_node, 4 MCD 500 + 4 FC 51 at 100 Hz, {baudrate} baud 8E1 timing '
           f'through the wire pacer, {seconds:.1f} s window')
-    print(f'node CPU: {percent(process_after - process_before):.1f} % of one core')
+    user, system = (after - before for after, before in zip(process_after, process_before))
+    print(f'node CPU: {percent(user + system):.1f} % of one core (user {percent(user):.1f} %, '
+          f'system {percent(system):.1f} %)')
     print('  tid      thread            % of one core')
     rows = []
     for tid, (name, ticks) in threads_after.items():
