@@ -17,14 +17,21 @@ README's "Safety model").
 
 :meth:`run_once` has no waiting of its own (it returns how long to wait), so unit tests
 drive it with a fake clock and a fake transport; :meth:`start` runs it on a thread.
+
+Events (readings, changes of state) go to the listener in the order they happened, from the
+bus thread, while the next request is on the wire (the transport reports it sent), or
+before the bus waits for anything but the inter-frame gap: the listener's work (publishing)
+never delays the next frame. With a transport that does not report its requests, after
+each transaction.
 """
 
+from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 import math
 import threading
 import time
-from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Union
+from typing import Any, Callable, Deque, Dict, FrozenSet, List, Mapping, Optional, Union
 
 from drive_bridge.bus import deadman
 from drive_bridge.bus.device import BusDevice, DeviceSpec
@@ -118,6 +125,9 @@ class BusMaster:
                                lambda: self._commands_enabled)
         self.internal_errors = 0
         self.last_internal_error = ''
+        self._events: Deque[BusEvent] = deque()  # emitted, not given to the listener yet
+        self._delivering = threading.Lock()  # one thread gives them at a time, in order
+        transport.on_request_sent = self._deliver_events
 
     # -- public API (any thread) --------------------------------------------------------
     @property
@@ -346,6 +356,7 @@ class BusMaster:
             deadline = self.clock() + timeout_s + self.timing.transaction_timeout_s
             while not future.done() and self.clock() < deadline:
                 self.run_step(max_wait_s=0.005)
+            self._deliver_events()
         try:
             return future.result(timeout=timeout_s + 2 * self.timing.transaction_timeout_s)
         except Exception as error:  # noqa: B902 - reported in words, never raised here
@@ -412,6 +423,7 @@ class BusMaster:
                             'reopening the link')
         except Exception:  # noqa: B902 - the bus thread must never die
             pass
+        self._deliver_events()
         return 0.1
 
     def shutdown(self, stop_motors: bool = True, timeout_s: float = 3.0) -> List[str]:
@@ -427,6 +439,7 @@ class BusMaster:
         self._wake.set()
         if self._thread is not None:
             self._thread.join(timeout=timeout_s + 1.0)
+        self._deliver_events()
         self.transport.close()
         return outcomes
 
@@ -450,15 +463,23 @@ class BusMaster:
             wait_s = self._link.wait_s(now)
             if wait_s > 0 or not self._open_link():
                 self._drain_jobs_while_down()
+                self._deliver_events()
                 return max(self._link.wait_s(self.clock()), 0.001)
         # What goes next is chosen just before it can go, so that a command that comes in
         # the gap goes before the poll step that was next (the rest of the gap is slept in
-        # the transaction).
+        # the transaction). The events wait for the next request to leave.
         choose_in_s = self._runner.gap_left_s(now) - CHOICE_LEAD_S
         if choose_in_s > MIN_WAIT_S:
             return choose_in_s
         self._expire_jobs(now)
         self._check_deadmen(now)
+        wait_s = self._run_next(now)
+        if wait_s > 0 or not self.transport.reports_request_sent:
+            self._deliver_events()
+        return wait_s
+
+    def _run_next(self, now: float) -> float:
+        """Run a job or a poll step; else return how long until a poll is due."""
         with self._lock:
             job = self._jobs.pop()
         if job is not None:
@@ -552,7 +573,15 @@ class BusMaster:
 
     # -- jobs ---------------------------------------------------------------------------
     def _emit(self, event: BusEvent) -> None:
-        try:
-            self.listener(event)
-        except Exception:  # noqa: B902 - a listener bug must not kill the bus thread
-            pass
+        """Queue ``event`` for the listener (any thread); see the module docstring."""
+        self._events.append(event)
+
+    def _deliver_events(self) -> None:
+        """Give the listener every event queued so far, oldest first; never raise."""
+        with self._delivering:
+            while self._events:
+                event = self._events.popleft()
+                try:
+                    self.listener(event)
+                except Exception:  # noqa: B902 - a listener bug must not kill the bus thread
+                    pass

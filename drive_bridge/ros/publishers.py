@@ -4,9 +4,11 @@ The topics of one device: lifecycle publishers for the reading fields the device
 Every device publishes ``state`` and ``trip`` (latched: transient local, depth 1, sent on
 change), ``status_word`` and ``trip_code``; the optional fields only where the family and
 model report them (``motor_current``, ``motor_temperature``, ``speed_feedback``,
-``alarm_word``, ``warning_word``). Publishers carry no default QoS event handlers: nothing
-listens to them, and each one would be a waitable the executor rebuilds its wait set with.
-Publishing is thread-safe: the bus thread publishes each reading as it is decoded.
+``alarm_word``, ``warning_word``). The volatile topics go out with each reading where a
+subscription is matched to them, and are skipped where none is. Publishers carry no
+default QoS event handlers: nothing listens to them, and each one would be a waitable the
+executor rebuilds its wait set with. Publishing is thread-safe: the bus thread publishes
+each reading as it is decoded.
 """
 
 import threading
@@ -15,6 +17,7 @@ from typing import Any, Dict, FrozenSet, Optional
 from drive_bridge.devices.contracts import DeviceReading
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.lifecycle import LifecycleNode
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float32, String, UInt16, UInt32
 
@@ -30,6 +33,11 @@ OPTIONAL_TOPICS = {
     'alarm_word': ('alarm_word', UInt32, 'alarm_word', int),
     'warning_word': ('warning_word', UInt32, 'warning_word', int),
 }
+
+
+def listened(publisher: Publisher) -> bool:
+    """Return whether a subscription is matched to ``publisher`` now."""
+    return publisher.get_subscription_count() > 0
 
 
 class DevicePublishers:
@@ -72,12 +80,20 @@ class DevicePublishers:
                 self.state.publish(String(data=state))
 
     def publish_reading(self, reading: DeviceReading) -> None:
-        """Publish every field of a fresh reading (latched topics on change)."""
-        self.status_word.publish(UInt16(data=int(reading.status_word)))
-        self.trip_code.publish(UInt16(data=int(reading.trip_code)))
+        """
+        Publish every field of a fresh reading (latched topics on change).
+
+        A volatile topic that no subscription is matched to is skipped: it would deliver to
+        nobody (a later subscriber gets no history of a volatile topic), and building and
+        serializing its message is most of what a reading costs the node.
+        """
+        if listened(self.status_word):
+            self.status_word.publish(UInt16(data=int(reading.status_word)))
+        if listened(self.trip_code):
+            self.trip_code.publish(UInt16(data=int(reading.trip_code)))
         for publisher, attribute, convert in self.optional.values():
             value = getattr(reading, attribute)
-            if value is not None:
+            if value is not None and listened(publisher):
                 publisher.publish(publisher.msg_type(data=convert(value)))
         with self._lock:
             if reading.trip_name != self._last_trip:

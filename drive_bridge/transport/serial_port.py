@@ -4,13 +4,20 @@ The serial port that the native transports share: open, close, read until a dead
 A local port is opened exclusively (POSIX: pyserial's ``exclusive=True``, an ``flock``), so
 that a second master (the node and ``drive-bridge`` on the same line) gets one clear line
 naming the holder instead of a line where two masters talk over each other.
+
+A local POSIX port is read by its descriptor, and a wait for ``n`` bytes is one ``select``
+with the terminal's ``VMIN`` set to ``n``: the kernel's line discipline reports the port
+readable only once ``n`` bytes are there (``VTIME`` 0), so the thread wakes once when a
+reply is complete instead of once per byte or per USB batch. Where ``VMIN`` cannot be set
+(not a terminal) or has no effect on ``select`` (not Linux), the same loop wakes per chunk
+and reads what is there: only the number of wake-ups differs, never what is read.
 """
 
 import errno
 import os
 import select
 import time
-from typing import Callable, Optional
+from typing import Callable, List, Optional
 
 from drive_bridge.errors import LineBabble, LinkDown
 from drive_bridge.transport.base import Transport
@@ -21,13 +28,17 @@ import serial
 PARITIES = {'N': serial.PARITY_NONE, 'E': serial.PARITY_EVEN, 'O': serial.PARITY_ODD}
 STOPBITS = {1: serial.STOPBITS_ONE, 2: serial.STOPBITS_TWO}
 try:  # tcflush on a port whose adapter was unplugged raises termios.error, not OSError
+    import termios
     from termios import error as TermiosError
 except ImportError:  # not POSIX
+    termios = None
+
     class TermiosError(Exception):
         """Placeholder where termios does not exist."""
 PORT_ERRORS = (serial.SerialException, OSError, TermiosError)
 EARLY_WAKE_S = 0.002  # how much before a reply's end a wait for it ends
 MIN_DRAIN_SILENCE_S = 0.005
+MAX_VMIN = 255  # VMIN is one byte of the terminal's settings
 
 
 def exclusive_open(port: str) -> bool:
@@ -50,6 +61,19 @@ def direct_descriptor(port) -> Optional[int]:
     return fd
 
 
+def terminal_settings(fd: int) -> Optional[List]:
+    """Return the terminal settings of ``fd`` to set VMIN with, or None if it has none."""
+    if termios is None:
+        return None
+    try:
+        settings = termios.tcgetattr(fd)
+    except (TermiosError, OSError):
+        return None
+    settings[6] = list(settings[6])
+    settings[6][termios.VTIME] = 0  # VMIN alone decides readiness (pyserial sets VTIME 0)
+    return settings
+
+
 def _read_ready(fd: int, count: int) -> bytes:
     """Return up to ``count`` bytes that are there (a tty with VMIN 0 returns none)."""
     try:
@@ -61,12 +85,16 @@ def _read_ready(fd: int, count: int) -> bytes:
 class SerialPortTransport(Transport):
     """Own one pyserial port (device path or URL such as ``socket://``); subclasses talk."""
 
+    reports_request_sent = True  # every write ends in _write, which reports it
+
     def __init__(self, settings: LinkSettings,
                  open_port: Callable[..., object] = serial.serial_for_url):
         super().__init__(settings)
         self._open_port = open_port
         self._port = None
         self._fd: Optional[int] = None  # a local POSIX port's descriptor, read directly
+        self._terminal: Optional[List] = None  # its terminal settings, to set VMIN with
+        self._vmin = -1  # the VMIN set on it now (-1: not known)
 
     @property
     def connected(self) -> bool:
@@ -97,15 +125,23 @@ class SerialPortTransport(Transport):
             raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}'
                            + open_hint(settings)) from error
         self._fd = direct_descriptor(self._port)
+        self._terminal = None if self._fd is None else terminal_settings(self._fd)
+        self._vmin = -1
 
     def close(self) -> None:
-        """Close the port (idempotent)."""
-        port, self._port, self._fd = self._port, None, None
+        """Close the port (idempotent), leaving VMIN as pyserial set it (0)."""
+        port, self._port = self._port, None
         if port is not None:
+            try:
+                if self._terminal is not None and self._vmin > 0:
+                    self._set_vmin(0)
+            except PORT_ERRORS:
+                pass  # the adapter is gone: nothing to leave behind
             try:
                 port.close()
             except PORT_ERRORS:
                 pass
+        self._fd, self._terminal = None, None
 
     def _require_port(self) -> None:
         if self._port is None:
@@ -119,6 +155,11 @@ class SerialPortTransport(Transport):
         return LinkDown(f'bus offline: {self.settings.describe()}: {error}')
 
     def _write(self, data: bytes, deadline: float) -> None:
+        """Write ``data`` whole, then report it sent (:attr:`on_request_sent`)."""
+        self._write_whole(data, deadline)
+        self.on_request_sent()
+
+    def _write_whole(self, data: bytes, deadline: float) -> None:
         """Write ``data`` whole; on a local POSIX port straight to its descriptor."""
         if self._fd is None:
             self._port.write(data)
@@ -140,22 +181,25 @@ class SerialPortTransport(Transport):
         data = b''
         while len(data) < count:
             remaining = deadline - time.monotonic()
-            chunk = self._read_some(count - len(data), remaining)
+            missing = count - len(data)
+            chunk = self._read_some(missing, remaining, at_least=missing)
             if not chunk and remaining <= 0:
                 break
             data += chunk
         return data
 
-    def _read_some(self, count: int, timeout_s: float) -> bytes:
+    def _read_some(self, count: int, timeout_s: float, at_least: int = 1) -> bytes:
         """
-        Read up to ``count`` bytes, waiting at most ``timeout_s`` for the first of them.
+        Read up to ``count`` bytes, waiting at most ``timeout_s`` for ``at_least`` of them.
 
-        The port is open with timeout 0 (a read returns what is there), so no call here
-        changes the port's timeout (pyserial reconfigures the port on every change) and one
-        select is the only wake-up while nothing arrives.
+        Returns fewer than ``at_least`` (what is there) when the time is up, and on a port
+        without VMIN as soon as anything is there. The port is open with timeout 0 (a read
+        returns what is there), so no call here changes the port's timeout (pyserial
+        reconfigures the port on every change) and one select is the only wake-up while
+        nothing arrives.
         """
         if self._fd is not None:
-            return self._read_descriptor(count, timeout_s)
+            return self._read_descriptor(count, timeout_s, at_least)
         port = self._port
         if not port.in_waiting:
             if timeout_s <= 0:
@@ -165,20 +209,25 @@ class SerialPortTransport(Transport):
                 return b''
         return port.read(count)
 
-    def _read_descriptor(self, count: int, timeout_s: float) -> bytes:
+    def _read_descriptor(self, count: int, timeout_s: float, at_least: int) -> bytes:
         """
         :meth:`_read_some` on a local POSIX port: ``os.read`` on its non-blocking descriptor.
 
         pyserial's ``read`` costs a ``select`` and its timeout bookkeeping on every call, even
-        when the bytes are there; this is the bus thread's most frequent call.
+        when the bytes are there; this is the bus thread's most frequent call. With VMIN set
+        to ``at_least`` the ``select`` returns at once if they are there, else when they are
+        (one wake-up) or when the time is up (then what is there is read).
         """
         fd = self._fd
-        data = _read_ready(fd, count)
-        if data or timeout_s <= 0:
-            return data
-        ready, _, _ = select.select([fd], [], [], timeout_s)
+        if self._terminal is None:
+            data = _read_ready(fd, count)
+            if data or timeout_s <= 0:
+                return data
+        else:
+            self._set_vmin(min(at_least, count, MAX_VMIN))
+        ready, _, _ = select.select([fd], [], [], max(0.0, timeout_s))
         if not ready:
-            return b''
+            return b'' if self._terminal is None else _read_ready(fd, count)
         data = _read_ready(fd, count)
         if not data:  # readable but nothing: the adapter is gone (pyserial's words for it)
             raise serial.SerialException('device reports readiness to read but returned no '
@@ -186,14 +235,24 @@ class SerialPortTransport(Transport):
                                          'port?)')
         return data
 
+    def _set_vmin(self, count: int) -> None:
+        """Make ``select`` report the port readable only with ``count`` bytes there."""
+        if count != self._vmin:
+            self._terminal[6][termios.VMIN] = count
+            termios.tcsetattr(self._fd, termios.TCSANOW, self._terminal)
+            self._vmin = count
+
     def _await_bytes(self, count: int, char_s: float, deadline: float) -> None:
         """
         Sleep until ``count`` more bytes can have crossed the wire, unless they are there.
 
         A reply cannot arrive faster than its wire time: one sleep instead of a wake-up per
         byte or per USB batch. On a link that does not pace bytes (a pty, TCP) they are
-        already there and nothing waits.
+        already there and nothing waits. A port with VMIN needs no sleep: the read that
+        follows wakes once, when the bytes are there.
         """
+        if self._terminal is not None:
+            return
         waiting = self._port.in_waiting
         if waiting >= count:
             return

@@ -57,16 +57,19 @@ class RtuSerialTransport(SerialPortTransport):
 
     def _receive(self, unit: int, function: int, expected: int, deadline: float) -> RtuFrame:
         """
-        Read the reply by its length: wait for its first byte, then for its wire time.
+        Read the reply by its length: wait for its first bytes, then for the rest.
 
-        Two wake-ups, whatever the baud rate or the adapter's batching: the first byte, and
-        the end of the ``expected`` bytes (a shorter exception reply is read when it is
-        there). Then the decoder says what is missing, if anything.
+        Two wake-ups, whatever the baud rate or the adapter's batching. On a local port
+        (VMIN): when the shortest reply's 5 bytes are there (an exception reply is then
+        whole), and when the bytes the decoder says are missing are there. Elsewhere: the
+        first byte, and the wire time of the ``expected`` bytes. Then the decoder says what
+        is missing, if anything.
         """
-        buffer = self._read_some(1, deadline - time.monotonic())
+        buffer = self._read_some(rtu.MIN_RESPONSE_BYTES, deadline - time.monotonic(),
+                                 at_least=rtu.MIN_RESPONSE_BYTES)
         if not buffer:
             raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
-        self._await_bytes(expected - 1, self._char_s, deadline)
+        self._await_bytes(expected - len(buffer), self._char_s, deadline)
         awaited = expected  # bytes whose wire time was waited for since the first one
         needed = rtu.MIN_RESPONSE_BYTES
         while True:
@@ -95,8 +98,8 @@ class RtuSerialTransport(SerialPortTransport):
                 raise error_type(f'invalid reply ({result.error}), {len(buffer)} bytes '
                                  'received')
             if len(buffer) < needed:  # the deadline passed
-                raise TruncatedFrame(f'truncated reply: {len(buffer)} of {needed} bytes '
-                                     f'within {self.settings.timeout_s:g} s')
+                raise TruncatedFrame(f'truncated reply: {len(buffer)} of {result.needed} '
+                                     f'bytes within {self.settings.timeout_s:g} s')
             needed = result.needed
             if needed > awaited:  # not slept for yet (a second sleep would wake late)
                 self._await_bytes(needed - len(buffer), self._char_s, deadline)

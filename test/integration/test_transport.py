@@ -2,12 +2,16 @@
 
 import os
 import select
+import sys
+import threading
 import time
 import tty
 
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
+from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.sim.mcd_device import make_mcd_server as make_server
+from drive_bridge.transport import serial_port
 from drive_bridge.transport.modbus import LinkSettings
 from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
 from drive_bridge.transport.serial_port import direct_descriptor
@@ -89,6 +93,8 @@ def test_native_engine_garbage_wrong_address_and_truncation(sim_bus):
     try:
         for hook, text in ((lambda unit, data: b'\x15' + data[1:], 'reply from address 21'),
                            (lambda unit, data: data[:6], 'truncated reply: 6 of 17 bytes'),
+                           # fewer than the 5 bytes the first wait asks the kernel for
+                           (lambda unit, data: data[:3], 'truncated reply: 3 of 17 bytes'),
                            (lambda unit, data: b'\xff\xff\xff', 'reply from address 255')):
             sim_bus.reply_hook = hook
             with pytest.raises(BadFrame, match=text):
@@ -176,3 +182,47 @@ def test_a_port_that_takes_no_more_bytes_is_link_down_within_the_timeout():
         transport.close()
         for fd in (master_fd, slave_fd, filler):
             os.close(fd)
+
+
+class CountingSelect:
+    """``select.select`` for the transport's module that counts the calls that may wait."""
+
+    def __init__(self):
+        self.waits = 0
+
+    def select(self, *args):
+        self.waits += args[3] > 0
+        return select.select(*args)
+
+
+def answer_byte_by_byte(fd: int, reply: bytes, pause_s: float) -> None:
+    """Read one request on a pty's master side, then answer one byte at a time."""
+    select.select([fd], [], [], 5.0)
+    os.read(fd, 256)
+    for byte in reply:
+        time.sleep(pause_s)
+        os.write(fd, bytes([byte]))
+
+
+@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='VMIN and select: Linux')
+@pytest.mark.parametrize('pause_s', [0.0, 0.002])
+def test_native_engine_wakes_twice_for_a_reply_however_its_bytes_arrive(pause_s, monkeypatch):
+    # VMIN: the kernel reports the port readable once the 5 first bytes are there, then once
+    # the rest is, not for every byte (nor every USB batch).
+    master_fd, slave_fd = os.openpty()
+    tty.setraw(master_fd)
+    reply = rtu.registers_response(20, 3, [1, 2, 3, 4, 5, 6]).encode()
+    answer = threading.Thread(target=answer_byte_by_byte, args=(master_fd, reply, pause_s))
+    transport = transport_for(LinkSettings(port=os.ttyname(slave_fd), parity='N',
+                                           timeout_s=1.0), 'native')
+    counting = CountingSelect()
+    monkeypatch.setattr(serial_port, 'select', counting)
+    try:
+        answer.start()
+        assert transport.execute(20, ReadRegisters(2, 6)) == [1, 2, 3, 4, 5, 6]
+        assert counting.waits == 2
+    finally:
+        answer.join()
+        transport.close()
+        os.close(master_fd)
+        os.close(slave_fd)

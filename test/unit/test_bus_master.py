@@ -290,3 +290,68 @@ def test_an_unexpected_error_on_the_bus_thread_reports_the_bus_offline_and_reope
     transport.failures.clear()
     run_for(bus, clock, 2.0)
     assert bus.snapshot('d20').online is True  # reopened with backoff, polled again
+
+
+class ReportingTransport(FakeTransport):
+    """A transport that reports each request sent, as the serial engines do."""
+
+    reports_request_sent = True
+
+    def __init__(self, clock, timeline):
+        super().__init__(clock)
+        self.timeline = timeline
+
+    def execute(self, unit, transaction):
+        self.timeline.append(('sent', unit, self.clock.now))
+        self.on_request_sent()
+        return super().execute(unit, transaction)
+
+
+def make_reporting_bus(rates, timing=None):
+    clock = FakeClock()
+    timeline = []
+    transport = ReportingTransport(clock, timeline)
+    specs = [DeviceSpec(f'd{unit}', unit, mcd.McdProfile('mcd500'), poll_rate_hz=rate)
+             for unit, rate in rates.items()]
+    bus = BusMaster(transport, specs, timing or BusTiming(frame_gap_s=0.004),
+                    listener=lambda event: timeline.append((event.kind, event.device,
+                                                            clock.now)),
+                    clock=clock, sleep=clock.sleep)
+    return bus, clock, timeline
+
+
+def test_on_a_busy_line_events_go_out_while_the_next_request_is_on_the_wire():
+    # Both devices as fast as the line allows: a transaction follows every gap.
+    bus, clock, timeline = make_reporting_bus({1: 100.0, 2: 100.0})
+    run_for(bus, clock, 0.5)
+    events = [index for index, entry in enumerate(timeline) if entry[0] != 'sent']
+    assert len(events) > 20
+    for index in events:  # given out as a request left (same time), never in a gap
+        sent = max(i for i in range(index) if timeline[i][0] == 'sent')
+        assert timeline[index][2] == timeline[sent][2]
+    kinds = [(kind, device) for kind, device, _ in timeline if kind != 'sent']
+    assert kinds[:4] == [('online', 'd1'), ('reading', 'd1'), ('online', 'd2'),
+                         ('reading', 'd2')]  # in the order they happened
+    # d1's first reading went out with the second request on the line (d2's poll).
+    first = next(i for i, entry in enumerate(timeline) if entry[:2] == ('reading', 'd1'))
+    assert [entry[:2] for entry in timeline[:first] if entry[0] == 'sent'] == \
+        [('sent', 1), ('sent', 2)]
+
+
+def test_on_an_idle_line_events_go_out_before_the_bus_waits_for_the_next_poll():
+    bus, clock, timeline = make_reporting_bus({1: 5.0})
+    run_for(bus, clock, 1.0)
+    sends = [entry for entry in timeline if entry[0] == 'sent']
+    readings = [entry for entry in timeline if entry[0] == 'reading']
+    assert len(sends) == len(readings) == 5
+    for sent, reading in zip(sends, readings):  # its own poll's, 0.2 s before the next one
+        assert 0 < reading[2] - sent[2] < 0.1
+
+
+def test_events_still_queued_go_out_at_shutdown():
+    bus, clock, timeline = make_reporting_bus({1: 100.0, 2: 100.0})
+    while bus.snapshot('d2').reading is None:  # until d2's first poll has ended
+        clock.sleep(bus.run_once())
+    assert ('reading', 'd2') not in [entry[:2] for entry in timeline]  # no request since
+    bus.shutdown(stop_motors=False)
+    assert ('reading', 'd2') in [entry[:2] for entry in timeline]

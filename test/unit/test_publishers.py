@@ -1,0 +1,66 @@
+"""The device topics: what a reading publishes, and that nobody's topic costs nothing."""
+
+from drive_bridge.devices.contracts import DeviceReading
+import pytest
+
+# rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
+publishers = pytest.importorskip('drive_bridge.ros.publishers', reason='ROS 2 (rclpy) from PyPI')
+
+
+class FakePublisher:
+    """A lifecycle publisher: the messages it sent, and how many subscriptions it has."""
+
+    def __init__(self, msg_type):
+        self.msg_type = msg_type
+        self.subscriptions = 0
+        self.sent = []
+
+    def get_subscription_count(self):
+        return self.subscriptions
+
+    def publish(self, message):
+        self.sent.append(message.data)
+
+
+class FakeNode:
+    """What DevicePublishers needs of the node: it creates lifecycle publishers."""
+
+    def __init__(self):
+        self.topics = {}
+
+    def create_lifecycle_publisher(self, msg_type, topic, qos, event_callbacks=None):
+        self.topics[topic] = FakePublisher(msg_type)
+        return self.topics[topic]
+
+
+FIELDS = frozenset({'motor_current', 'speed_feedback'})
+READING = DeviceReading(state='running', status_word=0x0F07, motor_current_a=4.5,
+                        speed_feedback_pct=40.0)
+
+
+def sent(node):
+    return {topic: publisher.sent for topic, publisher in node.topics.items()
+            if publisher.sent}
+
+
+def test_a_reading_goes_to_every_topic_a_subscription_listens_to():
+    node = FakeNode()
+    device = publishers.DevicePublishers(node, 'feeder', FIELDS)
+    for publisher in node.topics.values():
+        publisher.subscriptions = 1
+    device.publish_reading(READING)
+    assert sent(node) == {'feeder/state': ['running'], 'feeder/trip': [''],
+                          'feeder/status_word': [0x0F07], 'feeder/trip_code': [0],
+                          'feeder/motor_current': [4.5], 'feeder/speed_feedback': [40.0]}
+
+
+def test_volatile_topics_nobody_listens_to_are_skipped_and_latched_ones_never_are():
+    node = FakeNode()
+    device = publishers.DevicePublishers(node, 'feeder', FIELDS)
+    device.publish_reading(READING)
+    # state and trip are latched: a later subscriber gets the last one, so they always go.
+    assert sent(node) == {'feeder/state': ['running'], 'feeder/trip': ['']}
+    node.topics['feeder/motor_current'].subscriptions = 1  # ros2 topic echo feeder/motor_current
+    device.publish_reading(READING)
+    assert sent(node) == {'feeder/state': ['running'], 'feeder/trip': [''],
+                          'feeder/motor_current': [4.5]}
