@@ -18,9 +18,11 @@ word, main actual value and motor current (16-14).
 
 The ratios are the node's data sets per second over each naive loop's. At the wire limit
 the ratio to a per-value loop is bounded by the frames each needs (the FC 51's status and
-current sit in separate blocks of its map): about 2.05x for this line. Also printed: the wire
-limit for the node's own mix of frames and the fraction of it the node reached.
-Run: .venv/bin/python bench/mixed_line.py [window s]
+current sit in separate blocks of its map): printed as "bound", from the requests' wire time
+with both gaps (about 2.05x for this line). Also printed: the wire limit for the node's own
+mix of frames and the fraction of it the node reached. ``--naive-only`` runs the naive loops
+alone, without ROS (for the pymodbus 3.6.9 venv, which has no rclpy).
+Run: .venv/bin/python bench/mixed_line.py [window s] [--naive-only]
 """
 
 import inspect
@@ -28,7 +30,7 @@ import sys
 import time
 from typing import Dict, Tuple
 
-from drive_bridge.devices.drive import COIL_STATUS
+from drive_bridge.devices.drive import COIL_STATUS, PROCESS_COILS
 from drive_bridge.errors import TransportError
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadCoils, ReadRegisters
@@ -41,8 +43,6 @@ from pymodbus.client import ModbusSerialClient
 from pymodbus.exceptions import ModbusException
 
 ros_environment()
-from node_cpu import wait_until_ready  # noqa: E402, I100 - after the environment it reads
-import rclpy  # noqa: E402, I100
 
 MCD_FIRST_REGISTER = 2  # 40003
 FC_CURRENT_REGISTER = 10 * 1614 - 1  # 16-14
@@ -55,6 +55,22 @@ def naive_requests(block: Dict) -> Tuple:
         return tuple(ReadRegisters(MCD_FIRST_REGISTER + index, 1) for index in range(4))
     return (ReadCoils(COIL_STATUS, 16), ReadCoils(COIL_STATUS + 16, 16),
             ReadRegisters(FC_CURRENT_REGISTER, 2))
+
+
+def node_requests(block: Dict) -> Tuple:
+    """Return the node's requests for the same fast data (no command in force)."""
+    if block['family'] == 'mcd':
+        return (ReadRegisters(MCD_FIRST_REGISTER, 4),)
+    return (ReadCoils(COIL_STATUS, PROCESS_COILS), ReadRegisters(FC_CURRENT_REGISTER, 2))
+
+
+def ratio_bound(timing: LineTiming) -> float:
+    """Return the ratio of a naive loop's wire time to the node's, for one round of the line."""
+    def wire_s(requests) -> float:
+        return sum(timing.transaction_s(8, request.reply_length()) for request in requests)
+    blocks = LINE_DEVICES.values()
+    return sum(wire_s(naive_requests(block)) for block in blocks) / \
+        sum(wire_s(node_requests(block)) for block in blocks)
 
 
 class PlainPymodbus:
@@ -121,6 +137,7 @@ def is_poll_request(data: bytes) -> bool:
 
 def bench_node(line: PacedSimulator, seconds: float) -> Dict[str, float]:
     """Run the node on the line; return its device polls/s and its wire figures."""
+    from node_cpu import wait_until_ready  # imports rclpy
     node = NodeProcess(node_bus(line.path, line.timing.baudrate), LINE_DEVICES)
     try:
         wait_until_ready(list(LINE_DEVICES))
@@ -140,12 +157,17 @@ def bench_node(line: PacedSimulator, seconds: float) -> Dict[str, float]:
 
 
 def main() -> None:
-    seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 10.0
+    arguments = [argument for argument in sys.argv[1:] if argument != '--naive-only']
+    naive_only = len(arguments) < len(sys.argv) - 1
+    seconds = float(arguments[0]) if arguments else 10.0
     print(f'4 MCD 500 + 4 FC 51, fast data only, 8E1 timing through the wire pacer, '
           f'{seconds:g} s per case; pymodbus {PYMODBUS_VERSION} for the naive loop')
-    print(' baud  plain sets/s  tuned sets/s  node sets/s  ratio plain  ratio tuned  node tx/s  '
-          'wire limit/s  fraction')
-    rclpy.init()
+    print(' baud  plain sets/s  tuned sets/s' + ('' if naive_only else
+          '  node sets/s  ratio plain  ratio tuned  node tx/s  wire limit/s  fraction') +
+          '  bound')
+    if not naive_only:
+        import rclpy
+        rclpy.init()
     try:
         for baudrate in (9600, 19200):
             timing = LineTiming(baudrate, 'E', 1)
@@ -153,16 +175,20 @@ def main() -> None:
             try:
                 plain, plain_failures = bench_naive(line, seconds, plain=True)
                 tuned, tuned_failures = bench_naive(line, seconds, plain=False)
-                node = bench_node(line, seconds)
+                node = None if naive_only else bench_node(line, seconds)
             finally:
                 line.close()
             failures = plain_failures + tuned_failures
-            print(f'{baudrate:5d}  {plain:12.1f}  {tuned:12.1f}  {node["polls"]:11.1f}  '
-                  f'{node["polls"] / plain:10.2f}x  {node["polls"] / tuned:10.2f}x  '
-                  f'{node["rate"]:9.1f}  {node["limit"]:12.1f}  {node["fraction"]:8.1%}' +
+            node_columns = '' if node is None else (
+                f'  {node["polls"]:11.1f}  {node["polls"] / plain:10.2f}x  '
+                f'{node["polls"] / tuned:10.2f}x  {node["rate"]:9.1f}  '
+                f'{node["limit"]:12.1f}  {node["fraction"]:8.1%}')
+            print(f'{baudrate:5d}  {plain:12.1f}  {tuned:12.1f}{node_columns}'
+                  f'  {ratio_bound(timing):4.2f}x' +
                   (f'  (naive loops: {failures} failed requests)' if failures else ''))
     finally:
-        rclpy.try_shutdown()
+        if not naive_only:
+            rclpy.try_shutdown()
 
 
 if __name__ == '__main__':

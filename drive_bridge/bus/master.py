@@ -127,7 +127,7 @@ class BusMaster:
         self.last_internal_error = ''
         self._events: Deque[BusEvent] = deque()  # emitted, not given to the listener yet
         self._delivering = threading.Lock()  # one thread gives them at a time, in order
-        transport.on_request_sent = self._deliver_events
+        transport.on_request_sent = self._runner.while_in_flight(self._deliver_events)
 
     # -- public API (any thread) --------------------------------------------------------
     @property
@@ -439,7 +439,8 @@ class BusMaster:
         self._wake.set()
         if self._thread is not None:
             self._thread.join(timeout=timeout_s + 1.0)
-        self._deliver_events()
+        if self._thread is None or not self._thread.is_alive():  # else it may be delivering
+            self._deliver_events()
         self.transport.close()
         return outcomes
 
@@ -476,6 +477,8 @@ class BusMaster:
         wait_s = self._run_next(now)
         if wait_s > 0 or not self.transport.reports_request_sent:
             self._deliver_events()
+            if wait_s > 0:  # the wait started before the delivery
+                wait_s = max(0.0, wait_s - (self.clock() - now))
         return wait_s
 
     def _run_next(self, now: float) -> float:
@@ -558,7 +561,7 @@ class BusMaster:
             if job is None:
                 return
             if isinstance(job, StopAllJob):
-                self._work.run_stop_all(job)
+                self._work.run(job)  # each motor that may run: NOT STOPPED, with the reason
             else:
                 fail(job, CommandRefused(f'{self._link.error}: nothing sent'))
 

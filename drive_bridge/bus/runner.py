@@ -31,6 +31,17 @@ class TransactionRunner:
         self.clock = clock
         self.sleep = sleep
         self.last_end_s = -float('inf')
+        self.in_flight_s = 0.0  # the bus's own work while the last request was on the wire
+
+    def while_in_flight(self, work: Callable[[], None]) -> Callable[[], None]:
+        """Return ``work`` timed as work done while a request is on the wire (not its RTT)."""
+        def timed() -> None:
+            started = self.clock()
+            try:
+                work()
+            finally:
+                self.in_flight_s += self.clock() - started
+        return timed
 
     def gap_left_s(self, now: float) -> float:
         """Return how much longer the line must stay silent before the next frame."""
@@ -46,6 +57,7 @@ class TransactionRunner:
         if gap_s > 0:
             self.sleep(gap_s)
         started = self.clock()
+        self.in_flight_s = 0.0
         try:
             result = self.transport.execute(device.spec.unit, request)
         except TransportError as error:
@@ -54,7 +66,7 @@ class TransactionRunner:
             device.stats.record_error(error)
             raise
         self.last_end_s = self.clock()
-        rtt_s = self.last_end_s - started
+        rtt_s = self.last_end_s - started - self.in_flight_s
         self._count_recovered(device)
         device.stats.record_ok(rtt_s, slow=0 < self.slow_reply_s < rtt_s)
         return result

@@ -28,8 +28,8 @@ stop the node did not make itself (a stop service, the deadman, deactivate) or a
 auto_start keeps automatic starts off until the command goes to zero (and back). A trip is
 never reset automatically.
 
-Locking: the bus calls the listener with its lock held, so this module never calls the bus
-while holding its own lock.
+Locking: the bus calls the listener from its own thread, without its lock (while a request is
+on the wire), and this module never calls the bus while holding its own lock.
 """
 
 from dataclasses import dataclass, field

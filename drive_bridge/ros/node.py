@@ -9,11 +9,11 @@ of this node and refuses commands again (a stop is still taken while a motor may
 ``drive_bridge_node`` just works.
 
 Bus I/O never runs in a ROS callback, and no callback waits for the bus while holding the
-executor: the bus thread publishes each reading as it is decoded, and the command services
-are coroutines that await the bus's answer (the executor serves topics and timers
-meanwhile). SIGINT, SIGTERM and SIGHUP are taken by the main thread (:func:`main`): the
-first one stops every motor that may run because of the node, then the node exits; more
-signals meanwhile change nothing.
+executor: the bus thread publishes each reading (while its next request is on the wire: see
+:mod:`drive_bridge.bus.master`), and the command services are coroutines that await the
+bus's answer (the executor serves topics and timers meanwhile). SIGINT, SIGTERM and SIGHUP
+are taken by the main thread (:func:`main`): the first one stops every motor that may run
+because of the node, then the node exits; more signals meanwhile change nothing.
 """
 
 import functools
@@ -171,13 +171,9 @@ class DriveBridgeNode(LifecycleNode):
         result = super().on_activate(state)
         self.active = True
         self.bus.set_commands_enabled(True)
-        for name, publishers in self._device_publishers.items():
-            publishers.forget_latched()
-            snapshot = self.bus.snapshot(name)
-            if snapshot.reading is not None:
-                publishers.publish_reading(snapshot.reading)
-            else:
-                publishers.publish_state('offline' if snapshot.online is False else 'unknown')
+        with self._publishing:  # in the order of the bus's events: see republish
+            for publishers in self._device_publishers.values():
+                publishers.republish()
         self.get_logger().info('active: commands enabled')
         return result
 

@@ -8,11 +8,11 @@ model report them (``motor_current``, ``motor_temperature``, ``speed_feedback``,
 subscription is matched to them, and are skipped where none is. Publishers carry no
 default QoS event handlers: nothing listens to them, and each one would be a waitable the
 executor rebuilds its wait set with. Publishing is thread-safe: the bus thread publishes
-each reading as it is decoded.
+each reading, while its next request is on the wire (:mod:`drive_bridge.bus.master`).
 """
 
 import threading
-from typing import Any, Dict, FrozenSet, Optional
+from typing import Any, Dict, FrozenSet, Optional, Union
 
 from drive_bridge.devices.contracts import DeviceReading
 from rclpy.event_handler import PublisherEventCallbacks
@@ -60,6 +60,8 @@ class DevicePublishers:
             if field in fields}
         self._last_state: Optional[str] = None
         self._last_trip: Optional[str] = None
+        # What the bus told last: a reading, or a state without one (unknown, offline).
+        self._latest: Union[DeviceReading, str] = 'unknown'
 
     @property
     def every(self) -> list:
@@ -67,13 +69,28 @@ class DevicePublishers:
         return [self.state, self.trip, self.status_word, self.trip_code] + \
             [entry[0] for entry in self.optional.values()]
 
-    def forget_latched(self) -> None:
-        """Forget what the latched topics carry, so the next values go out (activation)."""
+    def republish(self) -> None:
+        """
+        Publish again what the bus told last, latched topics included (activation).
+
+        The last thing told, not a fresh snapshot of the bus: events still on their way are
+        newer than it, so nothing older can follow what this publishes.
+        """
         with self._lock:
             self._last_state = self._last_trip = None
+            latest = self._latest
+        if isinstance(latest, DeviceReading):
+            self.publish_reading(latest)
+        else:
+            self.publish_state(latest)
 
     def publish_state(self, state: str) -> None:
-        """Publish ``state`` if it changed."""
+        """Publish a state without a reading (unknown, offline) if it changed."""
+        with self._lock:
+            self._latest = state
+        self._publish_state(state)
+
+    def _publish_state(self, state: str) -> None:
         with self._lock:
             if state != self._last_state:
                 self._last_state = state
@@ -87,6 +104,8 @@ class DevicePublishers:
         nobody (a later subscriber gets no history of a volatile topic), and building and
         serializing its message is most of what a reading costs the node.
         """
+        with self._lock:
+            self._latest = reading
         if listened(self.status_word):
             self.status_word.publish(UInt16(data=int(reading.status_word)))
         if listened(self.trip_code):
@@ -99,7 +118,7 @@ class DevicePublishers:
             if reading.trip_name != self._last_trip:
                 self._last_trip = reading.trip_name
                 self.trip.publish(String(data=reading.trip_name))
-        self.publish_state(reading.state)
+        self._publish_state(reading.state)
 
     def destroy(self) -> None:
         """Destroy every publisher."""

@@ -62,7 +62,9 @@ class ApAsciiTransport(SerialPortTransport):
                 self.last_recovered = {'nak': attempt}
 
     def _exchange(self, unit: int, transaction) -> Optional[int]:
-        self._send(ap_ascii.address_fragment(unit, self.address_lrc_includes_eot))
+        # Reported sent after the message fragment only: the slave waits for it after its ACK.
+        self._send(ap_ascii.address_fragment(unit, self.address_lrc_includes_eot),
+                   report=False)
         self._expect_ack('address')
         self._send(ap_ascii.message_fragment(transaction.code))
         if isinstance(transaction, AsciiCommand):
@@ -78,9 +80,9 @@ class ApAsciiTransport(SerialPortTransport):
         except ValueError as error:
             raise BadFrame(f'invalid reply to {transaction.code}: {error}') from None
 
-    def _send(self, fragment: bytes) -> None:
+    def _send(self, fragment: bytes, report: bool = True) -> None:
         self._port.reset_input_buffer()
-        self._write(fragment, time.monotonic() + self.settings.timeout_s)
+        self._write(fragment, time.monotonic() + self.settings.timeout_s, report)
 
     def _expect_ack(self, what: str) -> None:
         reply = self._receive()

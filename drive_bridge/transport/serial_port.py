@@ -85,7 +85,7 @@ def _read_ready(fd: int, count: int) -> bytes:
 class SerialPortTransport(Transport):
     """Own one pyserial port (device path or URL such as ``socket://``); subclasses talk."""
 
-    reports_request_sent = True  # every write ends in _write, which reports it
+    reports_request_sent = True  # a request's last write goes through _write, which reports it
 
     def __init__(self, settings: LinkSettings,
                  open_port: Callable[..., object] = serial.serial_for_url):
@@ -154,10 +154,11 @@ class SerialPortTransport(Transport):
             return LinkDown(f'bus offline: {self.settings.port} not found')
         return LinkDown(f'bus offline: {self.settings.describe()}: {error}')
 
-    def _write(self, data: bytes, deadline: float) -> None:
-        """Write ``data`` whole, then report it sent (:attr:`on_request_sent`)."""
+    def _write(self, data: bytes, deadline: float, report: bool = True) -> None:
+        """Write ``data`` whole, then report it sent (:attr:`on_request_sent`) if asked."""
         self._write_whole(data, deadline)
-        self.on_request_sent()
+        if report:
+            self.on_request_sent()
 
     def _write_whole(self, data: bytes, deadline: float) -> None:
         """Write ``data`` whole; on a local POSIX port straight to its descriptor."""
@@ -214,26 +215,26 @@ class SerialPortTransport(Transport):
         :meth:`_read_some` on a local POSIX port: ``os.read`` on its non-blocking descriptor.
 
         pyserial's ``read`` costs a ``select`` and its timeout bookkeeping on every call, even
-        when the bytes are there; this is the bus thread's most frequent call. With VMIN set
-        to ``at_least`` the ``select`` returns at once if they are there, else when they are
-        (one wake-up) or when the time is up (then what is there is read).
+        when the bytes are there; this is the bus thread's most frequent call. What is there
+        is taken first; for the rest VMIN is set to the bytes still missing, so the ``select``
+        returns when they are there (one wake-up) or when the time is up (then what is there
+        is read). VMIN is changed only when a wait needs it: on a USB adapter that delivers
+        a whole reply at once it stays as it is.
         """
         fd = self._fd
-        if self._terminal is None:
-            data = _read_ready(fd, count)
-            if data or timeout_s <= 0:
-                return data
-        else:
-            self._set_vmin(min(at_least, count, MAX_VMIN))
-        ready, _, _ = select.select([fd], [], [], max(0.0, timeout_s))
-        if not ready:
-            return b'' if self._terminal is None else _read_ready(fd, count)
         data = _read_ready(fd, count)
-        if not data:  # readable but nothing: the adapter is gone (pyserial's words for it)
+        wanted = min(at_least, count)
+        if len(data) >= wanted or timeout_s <= 0 or (data and self._terminal is None):
+            return data
+        if self._terminal is not None:
+            self._set_vmin(min(wanted - len(data), MAX_VMIN))
+        ready, _, _ = select.select([fd], [], [], timeout_s)
+        more = _read_ready(fd, count - len(data))
+        if ready and not more:  # readable but nothing: the adapter is gone (pyserial's words)
             raise serial.SerialException('device reports readiness to read but returned no '
                                          'data (device disconnected or multiple access on '
                                          'port?)')
-        return data
+        return data + more
 
     def _set_vmin(self, count: int) -> None:
         """Make ``select`` report the port readable only with ``count`` bytes there."""

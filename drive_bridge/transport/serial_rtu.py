@@ -59,13 +59,13 @@ class RtuSerialTransport(SerialPortTransport):
         """
         Read the reply by its length: wait for its first bytes, then for the rest.
 
-        Two wake-ups, whatever the baud rate or the adapter's batching. On a local port
-        (VMIN): when the shortest reply's 5 bytes are there (an exception reply is then
-        whole), and when the bytes the decoder says are missing are there. Elsewhere: the
-        first byte, and the wire time of the ``expected`` bytes. Then the decoder says what
-        is missing, if anything.
+        At most two wake-ups, whatever the baud rate or the adapter's batching. On a local
+        port (VMIN): when the shortest reply's 5 bytes are there (an exception reply is then
+        whole), and, unless the rest came with them, when the bytes the decoder says are
+        missing are there. Elsewhere: the first byte, and the wire time of the ``expected``
+        bytes. Then the decoder says what is missing, if anything.
         """
-        buffer = self._read_some(rtu.MIN_RESPONSE_BYTES, deadline - time.monotonic(),
+        buffer = self._read_some(expected, deadline - time.monotonic(),
                                  at_least=rtu.MIN_RESPONSE_BYTES)
         if not buffer:
             raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')

@@ -355,3 +355,35 @@ def test_events_still_queued_go_out_at_shutdown():
     assert ('reading', 'd2') not in [entry[:2] for entry in timeline]  # no request since
     bus.shutdown(stop_motors=False)
     assert ('reading', 'd2') in [entry[:2] for entry in timeline]
+
+
+def test_slow_publishing_neither_counts_as_round_trip_nor_delays_the_next_poll():
+    # The listener takes 30 ms an event (a loaded machine publishing): on a busy line that
+    # happens while a request is on the wire, on an idle one before the bus waits.
+    for rates in ({1: 100.0, 2: 100.0}, {1: 5.0}):
+        bus, clock, timeline = make_reporting_bus(rates)
+        slow = bus.listener
+
+        def listener(event):
+            slow(event)
+            clock.sleep(0.03)
+        bus.listener = listener
+        run_for(bus, clock, 2.0)
+        assert bus.snapshot('d1').stats['rtt_max_ms'] == '20.0'
+        if rates == {1: 5.0}:
+            sends = [entry[2] for entry in timeline if entry[0] == 'sent']
+            assert [round(b - a, 6) for a, b in zip(sends, sends[1:])] == [0.2] * (len(sends) - 1)
+
+
+def test_stop_all_while_the_link_is_down_says_why_each_motor_was_not_stopped():
+    bus, transport, clock, _ = make_bus([1, 2])
+    run_for(bus, clock, 0.5)
+    start = bus.submit_command('d1', 'start')
+    run_for(bus, clock, 0.5)
+    assert 'acknowledged' in start.result(timeout=0) and bus.snapshot('d1').holds_run
+    transport.failures[2] = LinkDown('bus offline: /dev/ttyFAKE not found')
+    transport.link_ok = False
+    run_for(bus, clock, 0.5)  # the link is lost and cannot be opened again
+    assert bus.link_error
+    outcomes = bus.stop_all('shutdown')
+    assert outcomes == ['d1: NOT STOPPED: bus offline: /dev/ttyFAKE not found']

@@ -64,3 +64,18 @@ def test_volatile_topics_nobody_listens_to_are_skipped_and_latched_ones_never_ar
     device.publish_reading(READING)
     assert sent(node) == {'feeder/state': ['running'], 'feeder/trip': [''],
                           'feeder/motor_current': [4.5]}
+
+
+def test_activation_publishes_again_what_the_bus_told_last():
+    node = FakeNode()
+    device = publishers.DevicePublishers(node, 'feeder', FIELDS)
+    device.republish()  # nothing told yet
+    assert sent(node) == {'feeder/state': ['unknown']}
+    device.publish_reading(READING)
+    device.republish()  # the latched topics again, though unchanged
+    assert sent(node) == {'feeder/state': ['unknown', 'running', 'running'],
+                          'feeder/trip': ['', '']}
+    device.publish_state('offline')
+    device.republish()  # a state without a reading: never the reading before it
+    assert sent(node)['feeder/state'][-2:] == ['offline', 'offline']
+    assert sent(node)['feeder/trip'] == ['', '']
