@@ -21,8 +21,8 @@ drive it with a fake clock and a fake transport; :meth:`start` runs it on a thre
 Events (readings, changes of state) go to the listener in the order they happened, from the
 bus thread, while the next request is on the wire (the transport reports it sent), or
 before the bus waits for anything but the inter-frame gap: the listener's work (publishing)
-never delays the next frame. With a transport that does not report its requests, after
-each transaction.
+never delays the next frame. Events that a step did not carry out (it sent nothing), and
+with a transport that does not report its requests every event, go after the step.
 """
 
 from collections import deque
@@ -126,6 +126,7 @@ class BusMaster:
         self.internal_errors = 0
         self.last_internal_error = ''
         self._events: Deque[BusEvent] = deque()  # emitted, not given to the listener yet
+        self._delivered = 0  # events given to the listener so far
         self._delivering = threading.Lock()  # one thread gives them at a time, in order
         transport.on_request_sent = self._runner.while_in_flight(self._deliver_events)
 
@@ -474,8 +475,10 @@ class BusMaster:
             return choose_in_s
         self._expire_jobs(now)
         self._check_deadmen(now)
+        queued = self._delivered + len(self._events)
         wait_s = self._run_next(now)
-        if wait_s > 0 or not self.transport.reports_request_sent:
+        # Also events that a step did not carry out (it sent nothing, or failed before).
+        if wait_s > 0 or not self.transport.reports_request_sent or self._delivered < queued:
             self._deliver_events()
             if wait_s > 0:  # the wait started before the delivery
                 wait_s = max(0.0, wait_s - (self.clock() - now))
@@ -584,6 +587,7 @@ class BusMaster:
         with self._delivering:
             while self._events:
                 event = self._events.popleft()
+                self._delivered += 1
                 try:
                     self.listener(event)
                 except Exception:  # noqa: B902 - a listener bug must not kill the bus thread

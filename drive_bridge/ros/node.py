@@ -181,9 +181,16 @@ class DriveBridgeNode(LifecycleNode):
         """Refuse commands again and stop every motor that may run because of this node."""
         self.active = False
         self._report_stops(self.bus.stop_all('deactivate', STOP_ALL_TIMEOUT_S), 'deactivate')
+        # A subscriber that joins while the node is inactive gets the latched state: leave
+        # 'unknown' there, not the last state (say 'running' of a motor just stopped). No
+        # event of the bus gets between that and the publishers' deactivation.
+        with self._publishing:
+            for publishers in self._device_publishers.values():
+                publishers.withdraw()
+            result = super().on_deactivate(state)
         self.get_logger().info('inactive: commands refused (a stop is still taken while a '
                                'motor may run because of this node)')
-        return super().on_deactivate(state)
+        return result
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Close the bus (stopping what may still run) and remove the device interface."""

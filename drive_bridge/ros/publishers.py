@@ -84,6 +84,10 @@ class DevicePublishers:
         else:
             self.publish_state(latest)
 
+    def withdraw(self) -> None:
+        """Leave ``unknown`` on the latched state: nothing is told while the node is inactive."""
+        self._publish_state('unknown')
+
     def publish_state(self, state: str) -> None:
         """Publish a state without a reading (unknown, offline) if it changed."""
         with self._lock:

@@ -62,11 +62,11 @@ class ApAsciiTransport(SerialPortTransport):
                 self.last_recovered = {'nak': attempt}
 
     def _exchange(self, unit: int, transaction) -> Optional[int]:
-        # Reported sent after the message fragment only: the slave waits for it after its ACK.
-        self._send(ap_ascii.address_fragment(unit, self.address_lrc_includes_eot),
-                   report=False)
+        # Reported sent once, with the address fragment: the bus's work then overlaps the
+        # slave's answer to it (up to 250 ms), also when the address is dead.
+        self._send(ap_ascii.address_fragment(unit, self.address_lrc_includes_eot))
         self._expect_ack('address')
-        self._send(ap_ascii.message_fragment(transaction.code))
+        self._send(ap_ascii.message_fragment(transaction.code), report=False)
         if isinstance(transaction, AsciiCommand):
             self._expect_ack(transaction.code)
             return None

@@ -61,11 +61,12 @@ class RtuSerialTransport(SerialPortTransport):
 
         At most two wake-ups, whatever the baud rate or the adapter's batching. On a local
         port (VMIN): when the shortest reply's 5 bytes are there (an exception reply is then
-        whole), and, unless the rest came with them, when the bytes the decoder says are
-        missing are there. Elsewhere: the first byte, and the wire time of the ``expected``
-        bytes. Then the decoder says what is missing, if anything.
+        whole), and, unless the rest came with them (read without a wait), when the bytes the
+        decoder says are missing are there. Elsewhere: the first byte, and the wire time of
+        the ``expected`` bytes. Then the decoder says what is missing, if anything.
         """
-        buffer = self._read_some(expected, deadline - time.monotonic(),
+        # Up to 5 bytes only: whatever follows a 5-byte exception reply is not part of it.
+        buffer = self._read_some(rtu.MIN_RESPONSE_BYTES, deadline - time.monotonic(),
                                  at_least=rtu.MIN_RESPONSE_BYTES)
         if not buffer:
             raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
@@ -98,8 +99,11 @@ class RtuSerialTransport(SerialPortTransport):
                 raise error_type(f'invalid reply ({result.error}), {len(buffer)} bytes '
                                  'received')
             if len(buffer) < needed:  # the deadline passed
-                raise TruncatedFrame(f'truncated reply: {len(buffer)} of {result.needed} '
-                                     f'bytes within {self.settings.timeout_s:g} s')
+                length = rtu.response_length(buffer)
+                got = f'{len(buffer)} of {length} bytes' if length else \
+                    f'{len(buffer)} byte{"s" * (len(buffer) > 1)}, too few to tell its length,'
+                raise TruncatedFrame(f'truncated reply: {got} within '
+                                     f'{self.settings.timeout_s:g} s')
             needed = result.needed
             if needed > awaited:  # not slept for yet (a second sleep would wake late)
                 self._await_bytes(needed - len(buffer), self._char_s, deadline)

@@ -110,3 +110,26 @@ def test_bus_with_two_starters_and_a_dead_address(line):
             bus.submit_command('crusher', 'stop').result(3)
     finally:
         bus.shutdown(stop_motors=False)
+
+
+def test_a_dead_address_does_not_hold_back_the_readings_of_a_live_starter(line):
+    # The bus gives its listener each reading while a request is on the wire: on AP ASCII
+    # with the address fragment, so also while a dead address's ACK is awaited (0.5 s each).
+    config = build_config(
+        {'protocol': 'ap_ascii', 'port': line.pty_path, 'parity': 'N', 'timeout': 0.5,
+         'backoff_max': 1.0, 'devices': ['crusher', 'dead']},
+        {'crusher': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 5.0},
+         'dead': {'family': 'mcd', 'address': 22, 'poll_rate': 5.0}})
+    delays = []
+
+    def listener(event):
+        if event.kind == 'reading':
+            delays.append(time.monotonic() - event.stamp_s)
+    bus = BusMaster(config.make_transport(), [d.make_spec() for d in config.devices],
+                    config.timing, listener=listener).start()
+    try:
+        assert wait_until(lambda: bus.snapshot('dead').online is False and len(delays) > 10,
+                          10.0)
+    finally:
+        bus.shutdown(stop_motors=False)
+    assert max(delays) < 0.25, sorted(delays)[-3:]  # never a dead address's timeout

@@ -204,6 +204,13 @@ def answer_byte_by_byte(fd: int, reply: bytes, pause_s: float) -> None:
         os.write(fd, bytes([byte]))
 
 
+def answer_at_once(fd: int, reply: bytes) -> None:
+    """Read one request on a pty's master side, then write all of ``reply`` in one go."""
+    select.select([fd], [], [], 5.0)
+    os.read(fd, 256)
+    os.write(fd, reply)
+
+
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='VMIN and select: Linux')
 @pytest.mark.parametrize('pause_s', [0.0, 0.002])
 def test_native_engine_wakes_twice_for_a_reply_however_its_bytes_arrive(pause_s, monkeypatch):
@@ -221,6 +228,28 @@ def test_native_engine_wakes_twice_for_a_reply_however_its_bytes_arrive(pause_s,
         answer.start()
         assert transport.execute(20, ReadRegisters(2, 6)) == [1, 2, 3, 4, 5, 6]
         assert counting.waits == 2
+    finally:
+        answer.join()
+        transport.close()
+        os.close(master_fd)
+        os.close(slave_fd)
+
+
+def test_an_exception_reply_with_a_stray_byte_after_it_is_the_device_s_refusal():
+    # An RS-485 transceiver can leave a byte on the line after a reply: the 5-byte exception
+    # reply is whole, and what follows it is not read as part of it.
+    master_fd, slave_fd = os.openpty()
+    tty.setraw(master_fd)
+    reply = rtu.exception_response(20, 3, 2).encode() + b'\x00'
+    answer = threading.Thread(target=answer_at_once, args=(master_fd, reply))
+    transport = transport_for(LinkSettings(port=os.ttyname(slave_fd), parity='N',
+                                           timeout_s=1.0), 'native')
+    try:
+        answer.start()
+        started = time.monotonic()
+        with pytest.raises(DeviceException) as refused:
+            transport.execute(20, ReadRegisters(2, 6))
+        assert refused.value.code == 2 and time.monotonic() - started < 0.5
     finally:
         answer.join()
         transport.close()

@@ -5,7 +5,8 @@ from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 import pytest
 import rclpy
-from ros_helpers import RosClient, start_node, stop_node, write_params
+from ros_helpers import LATCHED, RosClient, start_node, stop_node, write_params
+from std_msgs.msg import String
 
 DEVICES = {'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 10.0,
                     'speed_reference': 30.0}}
@@ -88,6 +89,12 @@ def test_transitions_and_what_each_state_allows(managed, sim):
 
     assert lifecycle.transition(Transition.TRANSITION_DEACTIVATE)  # stops what it started
     assert sim.devices[1].model.control_word == STOP_WORD
+    # Nothing is reported while inactive: the latched state says 'unknown', not 'running' of
+    # the motor just stopped, also to a subscriber that joins now.
+    assert client.wait_state('conv', 'unknown')
+    joined_late = []
+    client.node.create_subscription(String, 'conv/state', joined_late.append, LATCHED)
+    assert client.spin_until(lambda: joined_late) and joined_late[-1].data == 'unknown'
     response = client.call('conv', 'start')
     assert not response.success and 'inactive' in response.message
 

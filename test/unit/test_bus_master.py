@@ -387,3 +387,28 @@ def test_stop_all_while_the_link_is_down_says_why_each_motor_was_not_stopped():
     assert bus.link_error
     outcomes = bus.stop_all('shutdown')
     assert outcomes == ['d1: NOT STOPPED: bus offline: /dev/ttyFAKE not found']
+
+
+class SilentDeviceTransport(ReportingTransport):
+    """Reports a request sent only to a device that answers (as a step failing before)."""
+
+    def execute(self, unit, transaction):
+        if unit in self.failures:
+            return FakeTransport.execute(self, unit, transaction)
+        return super().execute(unit, transaction)
+
+
+def test_events_a_step_did_not_carry_out_go_right_after_it():
+    clock = FakeClock()
+    timeline = []
+    transport = SilentDeviceTransport(clock, timeline)
+    transport.failures[2] = NoResponse('no reply within 0.5 s')
+    specs = [DeviceSpec(f'd{unit}', unit, mcd.McdProfile('mcd500'), poll_rate_hz=5.0)
+             for unit in (1, 2)]
+    delays = []
+    bus = BusMaster(transport, specs, BusTiming(frame_gap_s=0.004),
+                    listener=lambda event: delays.append(clock.now - event.stamp_s)
+                    if event.kind == 'reading' else None, clock=clock, sleep=clock.sleep)
+    run_for(bus, clock, 6.0)
+    assert len(delays) > 10
+    assert max(delays) <= TIMEOUT_S + 0.01  # one failed attempt, not every retry of it
