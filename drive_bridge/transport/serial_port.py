@@ -85,7 +85,7 @@ def _read_ready(fd: int, count: int) -> bytes:
 class SerialPortTransport(Transport):
     """Own one pyserial port (device path or URL such as ``socket://``); subclasses talk."""
 
-    reports_request_sent = True  # a request's last write goes through _write, which reports it
+    reports_request_sent = True  # each request is written by _write, which reports it
 
     def __init__(self, settings: LinkSettings,
                  open_port: Callable[..., object] = serial.serial_for_url):
