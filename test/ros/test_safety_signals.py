@@ -191,3 +191,20 @@ def test_sigterm_exits_cleanly_under_load(tmp_path):
         rig.stop()
     print(f'{SIGTERM_ROUNDS - len(failures)} of {SIGTERM_ROUNDS} SIGTERMs exited cleanly')
     assert not failures, '\n\n'.join(failures)
+
+
+def test_sigterm_with_the_line_unplugged_while_a_motor_runs_says_it_was_not_stopped(tmp_path):
+    """Case 8: the adapter is gone: nothing can be sent, the stop says so at once, exit 0."""
+    rig = make_rig('fc')
+    with Session(rig, tmp_path / 'unplugged.yaml', timeout=0.2, backoff_max=0.5) as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        assert client.call(rig.name, 'start').success
+        assert wait_for(rig.probe.moving, 10.0)
+        rig.server.unplug()
+        assert client.wait_state(rig.name, 'offline', 10.0)
+        code, output = session.signal(signal.SIGTERM)
+    assert clean_exit(code, output), output
+    assert 'NOT STOPPED: bus offline' in output, output
+    assert session.exit_s < 3.0  # no stop waited out its timeout
+    assert rig.probe.moving() and not rig.probe.last_write_stops()  # nothing could be sent
