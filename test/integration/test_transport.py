@@ -1,11 +1,13 @@
 """Both serial engines (native, pymodbus pinned and 3.6.9) against the simulated MCD module."""
 
+import contextlib
 import os
 import select
 import sys
 import threading
 import time
 import tty
+from typing import Optional
 
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
 from drive_bridge.protocol import rtu
@@ -195,20 +197,39 @@ class CountingSelect:
         return select.select(*args)
 
 
-def answer_byte_by_byte(fd: int, reply: bytes, pause_s: float) -> None:
-    """Read one request on a pty's master side, then answer one byte at a time."""
+def answer_one_request(fd: int, reply: bytes, pause_s: Optional[float]) -> None:
+    """
+    Read one request on a pty's master side, then answer it.
+
+    With ``pause_s`` None all of ``reply`` is written in one go, else one byte at a time with
+    ``pause_s`` before each.
+    """
     select.select([fd], [], [], 5.0)
     os.read(fd, 256)
+    if pause_s is None:
+        os.write(fd, reply)
+        return
     for byte in reply:
         time.sleep(pause_s)
         os.write(fd, bytes([byte]))
 
 
-def answer_at_once(fd: int, reply: bytes) -> None:
-    """Read one request on a pty's master side, then write all of ``reply`` in one go."""
-    select.select([fd], [], [], 5.0)
-    os.read(fd, 256)
-    os.write(fd, reply)
+@contextlib.contextmanager
+def native_transport_answered(reply: bytes, pause_s: Optional[float] = None):
+    """Yield the native engine on a pty whose other side answers one request with ``reply``."""
+    master_fd, slave_fd = os.openpty()
+    tty.setraw(master_fd)
+    answer = threading.Thread(target=answer_one_request, args=(master_fd, reply, pause_s))
+    transport = transport_for(LinkSettings(port=os.ttyname(slave_fd), parity='N',
+                                           timeout_s=1.0), 'native')
+    try:
+        answer.start()
+        yield transport
+    finally:
+        answer.join()
+        transport.close()
+        os.close(master_fd)
+        os.close(slave_fd)
 
 
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='VMIN and select: Linux')
@@ -216,42 +237,20 @@ def answer_at_once(fd: int, reply: bytes) -> None:
 def test_native_engine_wakes_twice_for_a_reply_however_its_bytes_arrive(pause_s, monkeypatch):
     # VMIN: the kernel reports the port readable once the 5 first bytes are there, then once
     # the rest is, not for every byte (nor every USB batch).
-    master_fd, slave_fd = os.openpty()
-    tty.setraw(master_fd)
     reply = rtu.registers_response(20, 3, [1, 2, 3, 4, 5, 6]).encode()
-    answer = threading.Thread(target=answer_byte_by_byte, args=(master_fd, reply, pause_s))
-    transport = transport_for(LinkSettings(port=os.ttyname(slave_fd), parity='N',
-                                           timeout_s=1.0), 'native')
     counting = CountingSelect()
-    monkeypatch.setattr(serial_port, 'select', counting)
-    try:
-        answer.start()
+    with native_transport_answered(reply, pause_s) as transport:
+        monkeypatch.setattr(serial_port, 'select', counting)
         assert transport.execute(20, ReadRegisters(2, 6)) == [1, 2, 3, 4, 5, 6]
         assert counting.waits == 2
-    finally:
-        answer.join()
-        transport.close()
-        os.close(master_fd)
-        os.close(slave_fd)
 
 
 def test_an_exception_reply_with_a_stray_byte_after_it_is_the_device_s_refusal():
     # An RS-485 transceiver can leave a byte on the line after a reply: the 5-byte exception
     # reply is whole, and what follows it is not read as part of it.
-    master_fd, slave_fd = os.openpty()
-    tty.setraw(master_fd)
     reply = rtu.exception_response(20, 3, 2).encode() + b'\x00'
-    answer = threading.Thread(target=answer_at_once, args=(master_fd, reply))
-    transport = transport_for(LinkSettings(port=os.ttyname(slave_fd), parity='N',
-                                           timeout_s=1.0), 'native')
-    try:
-        answer.start()
+    with native_transport_answered(reply) as transport:
         started = time.monotonic()
         with pytest.raises(DeviceException) as refused:
             transport.execute(20, ReadRegisters(2, 6))
         assert refused.value.code == 2 and time.monotonic() - started < 0.5
-    finally:
-        answer.join()
-        transport.close()
-        os.close(master_fd)
-        os.close(slave_fd)
