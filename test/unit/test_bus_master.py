@@ -62,9 +62,9 @@ class FakeTransport(Transport):
         return [t for t, u, txn in self.log if u == unit and isinstance(txn, ReadRegisters)]
 
 
-def make_bus(units, rates=None, timing=None, allow=None):
+def make_bus(units, rates=None, timing=None, allow=None, transport_type=None):
     clock = FakeClock()
-    transport = FakeTransport(clock)
+    transport = (transport_type or FakeTransport)(clock)
     events = []
     specs = [DeviceSpec(f'd{unit}', unit, mcd.McdProfile('mcd500'),
                         poll_rate_hz=(rates or {}).get(unit, 5.0),
@@ -297,9 +297,9 @@ class ReportingTransport(FakeTransport):
 
     reports_request_sent = True
 
-    def __init__(self, clock, timeline):
+    def __init__(self, clock):
         super().__init__(clock)
-        self.timeline = timeline
+        self.timeline = []  # ('sent', unit, time) and what the listener is given
 
     def execute(self, unit, transaction):
         self.timeline.append(('sent', unit, self.clock.now))
@@ -308,15 +308,11 @@ class ReportingTransport(FakeTransport):
 
 
 def make_reporting_bus(rates, timing=None):
-    clock = FakeClock()
-    timeline = []
-    transport = ReportingTransport(clock, timeline)
-    specs = [DeviceSpec(f'd{unit}', unit, mcd.McdProfile('mcd500'), poll_rate_hz=rate)
-             for unit, rate in rates.items()]
-    bus = BusMaster(transport, specs, timing or BusTiming(frame_gap_s=0.004),
-                    listener=lambda event: timeline.append((event.kind, event.device,
-                                                            clock.now)),
-                    clock=clock, sleep=clock.sleep)
+    """Return (bus, clock, timeline): requests sent and events given, in order, with times."""
+    bus, transport, clock, _ = make_bus(list(rates), rates, timing or BusTiming(
+        frame_gap_s=0.004), transport_type=ReportingTransport)
+    timeline = transport.timeline
+    bus.listener = lambda event: timeline.append((event.kind, event.device, clock.now))
     return bus, clock, timeline
 
 
@@ -399,16 +395,12 @@ class SilentDeviceTransport(ReportingTransport):
 
 
 def test_events_a_step_did_not_carry_out_go_right_after_it():
-    clock = FakeClock()
-    timeline = []
-    transport = SilentDeviceTransport(clock, timeline)
+    bus, transport, clock, _ = make_bus([1, 2], timing=BusTiming(frame_gap_s=0.004),
+                                        transport_type=SilentDeviceTransport)
     transport.failures[2] = NoResponse('no reply within 0.5 s')
-    specs = [DeviceSpec(f'd{unit}', unit, mcd.McdProfile('mcd500'), poll_rate_hz=5.0)
-             for unit in (1, 2)]
     delays = []
-    bus = BusMaster(transport, specs, BusTiming(frame_gap_s=0.004),
-                    listener=lambda event: delays.append(clock.now - event.stamp_s)
-                    if event.kind == 'reading' else None, clock=clock, sleep=clock.sleep)
+    bus.listener = lambda event: delays.append(clock.now - event.stamp_s) \
+        if event.kind == 'reading' else None
     run_for(bus, clock, 6.0)
     assert len(delays) > 10
     assert max(delays) <= TIMEOUT_S + 0.01  # one failed attempt, not every retry of it
