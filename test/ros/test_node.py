@@ -206,9 +206,12 @@ def test_a_restarted_node_opens_the_simulator_s_pty_with_parity_e_and_logs_why(t
             with running_node(tmp_path / 'bus.yaml', {'port': server.pty_path, 'parity': 'E'},
                               {'main': {'family': 'mcd', 'address': 20}},
                               ready=['main']) as client:
+                assert client.spin_until(lambda: 'is a pty' in node_output(client.process))
+                assert client.wait_state('main', 'ready')
                 log = node_output(client.process)
             notes = [line for line in log.splitlines() if 'is a pty' in line]
             assert len(notes) == 1 and '[INFO]' in notes[0], log
+            assert 'offline' not in log, log
             assert notes[0].endswith(f'{server.pty_path} is a pty: opened without parity (a pty '
                                      'has no wire, so no parity); timing as configured, 9600 '
                                      'baud 8E1'), log
