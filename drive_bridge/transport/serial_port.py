@@ -87,8 +87,6 @@ def refusal_text(settings: LinkSettings, framing: PortFraming, error: BaseExcept
                 'ENOTTY)')
     if code == errno.EISDIR:
         return f'cannot open {port}: it is a directory, not a serial port'
-    if code in (errno.EACCES, errno.EPERM):
-        return f'cannot open {port}: permission denied (add the user to the dialout group)'
     return f'cannot open {settings.describe()}: {error}' + open_hint(settings)
 
 

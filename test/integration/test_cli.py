@@ -20,6 +20,7 @@ import time
 
 from drive_bridge.bus.runner import TransactionRunner
 from drive_bridge.protocol import rtu
+from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from drive_bridge.tools.cli import main
@@ -610,6 +611,20 @@ def test_a_bad_option_is_named_as_it_was_typed(capsys, argv, message):
     assert error == f'drive-bridge: {message}\n' or \
         error.startswith(f'drive-bridge: {message}'), error
     assert "parameter '" not in error and '_1.' not in error and '_300' not in error
+
+
+def test_protocol_ap_ascii_alone_takes_its_8n1_without_a_parity_option(capsys):
+    server = make_ap_ascii_server({20: 'mcd500'})
+    server.open_pty()
+    server.start()
+    try:
+        code, out = run('status', '--protocol', 'ap_ascii', '--port', server.pty_path,
+                        '--family', 'mcd', '--address', 20)
+    finally:
+        server.stop()
+    assert code == 0 and out.startswith('mcd_20: mcd auto at address 20'), \
+        capsys.readouterr().err
+    assert capsys.readouterr().err == ''  # 8N1: opened as it is, nothing to say
 
 
 def test_a_silent_address_is_named_with_what_was_asked(line, capsys):
