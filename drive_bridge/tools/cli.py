@@ -522,8 +522,8 @@ def command_backup(args, out) -> int:
         try:
             backup_file.write(args.file, content, command)
         except OSError as error:
-            raise CliError(f'cannot write {args.file}: {error.strerror}: nothing saved') \
-                from None
+            raise CliError(f'cannot write {args.file}: {error.strerror or error}: nothing '
+                           'saved') from None
         print(f'{len(rows)} parameters of {session.name} saved to {args.file} and verified',
               file=out)
     with_session(args, backup)
@@ -823,7 +823,8 @@ SUBCOMMANDS = {
                "table; MCD: parameters 1 to the model's last), read them all again, and "
                'save them if nothing changed in between. The file names the device, model, '
                'address and date, and for each parameter its number, PNU, name, unit and '
-               'value. Reads only.'),
+               'value; its first lines give the whole command that restores it. FILE must be '
+               'new (--force overwrites it). Reads only.'),
     'restore': ('write a YAML backup back and verify',
                 'Check the whole file first and write nothing unless all of it fits: family '
                 'and model (never overridable), device name and address (--force to restore '
