@@ -182,8 +182,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         return run(session, args)
     except CtlError as error:
         return _say(error)
-    except Interrupted:
-        print(f'{PROG}: interrupted', file=sys.stderr, flush=True)
+    except Interrupted as interrupted:
+        print(f'{PROG}: interrupted' + (f': {interrupted}' if str(interrupted) else ''),
+              file=sys.stderr, flush=True)
         return 130
     finally:
         session.close()

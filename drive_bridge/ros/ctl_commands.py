@@ -30,7 +30,8 @@ def call(session: BridgeSession, service_name: str) -> int:
     """Call a Trigger service of the bridge once; exit status 0 on success, 1 if refused."""
     service = resolve(service_name, session.namespace, is_service=True)
     client = session.node.create_client(Trigger, service)
-    if not session.wait_for(client.service_is_ready):
+    if not session.wait_for(client.service_is_ready,
+                            lambda: TRIGGER in session.services().get(service, ())):
         services = session.services()
         if service in services:
             raise BadInput(f'{service} is a {services[service][0]} service, not a Trigger: '
@@ -41,10 +42,12 @@ def call(session: BridgeSession, service_name: str) -> int:
             'none: is it configured? see: lifecycle get'
         raise BadInput(f'{session.full_name} has no service {service} (its Trigger services: '
                        f'{hint})')
-    response = session.answer(
-        client.call_async(Trigger.Request()), service,
-        ': it may have been executed; look at the device state before calling again '
-        '(not repeated)')
+    future = client.call_async(Trigger.Request())
+    unknown = 'it may have been executed; look at the device state before calling again'
+    try:
+        response = session.answer(future, service, f': {unknown} (not repeated)')
+    except Interrupted:
+        raise Interrupted(f'{service} was called without an answer yet: {unknown}') from None
     print(f'success: {"true" if response.success else "false"}')
     print(f'message: {response.message}', flush=True)
     return 0 if response.success else 1
@@ -56,12 +59,14 @@ def reference(session: BridgeSession, device: str, percent: float,
     topic = resolve(f'{device}/speed_reference', session.namespace)
     publisher = session.node.create_publisher(Float32, topic, 10)
 
+    def listed() -> bool:
+        return _by_bridge(session, session.node.get_subscriptions_info_by_topic(topic))
+
     def connected() -> bool:
         readers = session.node.get_subscriptions_info_by_topic(topic)
-        bridge = any(reader.node_name == session.name and
-                     reader.node_namespace == session.namespace for reader in readers)
-        return bridge and publisher.get_subscription_count() >= len(readers)
-    if not session.wait_for(connected):
+        return _by_bridge(session, readers) and \
+            publisher.get_subscription_count() >= len(readers)
+    if not session.wait_for(connected, listed):
         drives = session.relative(list(session.subscriptions()), '/speed_reference')
         raise BadInput(f'{session.full_name} takes no speed reference on {topic} (its drives: '
                        f'{session.listing(drives)})')
@@ -95,7 +100,9 @@ def state(session: BridgeSession, device: str) -> int:
     topic = resolve(f'{device}/state', session.namespace)
     received: List[String] = []
     session.node.create_subscription(String, topic, received.append, LATCHED)
-    if not session.wait_for(lambda: _bridge_publishes(session, topic)):
+    if not session.wait_for(
+            lambda: _by_bridge(session, session.node.get_publishers_info_by_topic(topic)),
+            lambda: False):
         raise BadInput(f'{session.full_name} has no device {device!r} (its devices: '
                        f'{session.listing(session.devices())})')
     if not session.spin_until(lambda: bool(received), session.timeout_s):
@@ -104,15 +111,17 @@ def state(session: BridgeSession, device: str) -> int:
     return 0
 
 
-def _bridge_publishes(session: BridgeSession, topic: str) -> bool:
+def _by_bridge(session: BridgeSession, endpoints) -> bool:
+    """Return whether one of the topic ``endpoints`` belongs to the bridge node."""
     return any(info.node_name == session.name and info.node_namespace == session.namespace
-               for info in session.node.get_publishers_info_by_topic(topic))
+               for info in endpoints)
 
 
 def echo(session: BridgeSession, topic_name: str, count: Optional[int]) -> int:
     """Print the messages on a topic, ``count`` of them (each within --timeout) or until Ctrl-C."""
     topic = resolve(topic_name, session.namespace)
-    if not session.wait_for(lambda: bool(session.node.get_publishers_info_by_topic(topic))):
+    if not session.wait_for(lambda: bool(session.node.get_publishers_info_by_topic(topic)),
+                            lambda: False):
         published = sorted(name for name in session.publications() if name not in HIDDEN_TOPICS)
         raise BadInput(f'no publisher of {topic} ({session.full_name} publishes '
                        f'{session.listing(published)})')
@@ -170,7 +179,8 @@ def lifecycle(session: BridgeSession, action: str, label: str = '') -> int:
                                            f'{base}/get_available_transitions')
     change = session.node.create_client(ChangeState, f'{base}/change_state')
     clients = (get_state, available, change)
-    if not session.wait_for(lambda: all(client.service_is_ready() for client in clients)):
+    if not session.wait_for(lambda: all(client.service_is_ready() for client in clients),
+                            lambda: f'{base}/change_state' in session.services()):
         raise BadInput(f'{base} offers no lifecycle services')
 
     def current() -> str:

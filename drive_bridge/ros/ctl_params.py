@@ -24,7 +24,8 @@ class ParameterCommands:
         self.session = session
         self.node_name = session.full_name
         self.client = AsyncParameterClient(session.node, session.full_name)
-        if not session.wait_for(self.client.services_are_ready):
+        if not session.wait_for(self.client.services_are_ready, lambda: f'{self.node_name}/'
+                                'set_parameters' in session.services()):
             raise BadInput(f'{self.node_name} offers no parameter services')
 
     def _answer(self, future, service: str):

@@ -3,8 +3,9 @@ The bridge node as ``drive_bridge_ctl`` finds it in the ROS graph, with bounded 
 
 Every wait spins the command's own node, so discovery and answers are taken as they come,
 and ends early when SIGINT or SIGTERM came (:class:`Interrupted`). The node must appear
-within ``--timeout``; once it is there, a service or topic of it that has not appeared
-within :data:`GRACE_S` more does not exist (its entities are discovered together with it).
+within ``--timeout``; once it is there, a service or topic of it that is not in the graph
+within :data:`GRACE_S` more does not exist (its entities are discovered together with it),
+and one that is there gets ``--timeout`` to match the command's own client or publisher.
 """
 
 import os
@@ -22,7 +23,7 @@ SPIN_STEP_S = 0.05
 
 
 class Interrupted(Exception):
-    """SIGINT or SIGTERM came while waiting."""
+    """SIGINT or SIGTERM came while waiting; the message says what may have happened."""
 
 
 class BridgeSession:
@@ -73,10 +74,17 @@ class BridgeSession:
     def _node_present(self) -> bool:
         return (self.name, self.namespace) in self.node.get_node_names_and_namespaces()
 
-    def wait_for(self, predicate: Callable[[], bool]) -> bool:
-        """Find the node, then wait at most GRACE_S more for ``predicate``."""
+    def wait_for(self, ready: Callable[[], bool], listed: Callable[[], bool]) -> bool:
+        """
+        Find the node, then wait for ``ready`` (an entity of the node matched to ours).
+
+        An entity that is not even ``listed`` in the node's graph GRACE_S after the node
+        appeared does not exist (False); one that is listed gets ``--timeout`` to match.
+        """
         self.find_node()
-        return self.spin_until(predicate, max(0.0, self._seen_at + GRACE_S - time.monotonic()))
+        grace_s = max(0.0, self._seen_at + GRACE_S - time.monotonic())
+        self.spin_until(lambda: ready() or listed(), grace_s)
+        return ready() or (listed() and self.spin_until(ready, self.timeout_s))
 
     def answer(self, future: Future, what: str, hint: str = '') -> object:
         """Return the result of ``future``; raise Refused if none within ``--timeout``."""
