@@ -40,6 +40,7 @@ setup(
             'drive-bridge = drive_bridge.tools.cli:main',
             'drive_bridge_plot = drive_bridge.tools.plot_recording:main',
             'drive_bridge_record = drive_bridge.ros.record:main',
+            'drive_bridge_ctl = drive_bridge.ros.ctl:main',
         ],
     },
 )

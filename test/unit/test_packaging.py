@@ -12,7 +12,7 @@ import drive_bridge
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 COMMANDS = {'drive_bridge_node', 'drive_bridge_sim', 'drive-bridge', 'drive_bridge_plot',
-            'drive_bridge_record'}
+            'drive_bridge_record', 'drive_bridge_ctl'}
 
 
 def _package_xml() -> ElementTree.Element:
