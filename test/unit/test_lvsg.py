@@ -141,7 +141,7 @@ def test_a_trip_asks_for_the_trip_code_next():
     profile = LvsgProfile('mcd202', input_register=0, output_register=100)
     poll(profile, answer(0, 0))
     _, reading = poll(profile, answer(0, 0, ready=False, fault=True))
-    assert profile.request == lvsg.PARAMETER_STATE
+    assert profile.operating.request == lvsg.PARAMETER_STATE
     assert reading.trip_code == TRIP_CODE_UNKNOWN  # tripped, code not read yet: never 0
     _, reading = poll(profile, answer(2, 2 << 8 | 6, ready=False, fault=True))
     assert (reading.state, reading.trip_code, reading.trip_name) == ('tripped', 2,
