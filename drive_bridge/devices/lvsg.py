@@ -391,9 +391,9 @@ class LvsgProfile(DeviceProfile, CyclicControl):
                control: ControlView) -> str:
         """Return the starter's state (``state_byte``: None unless current)."""
         run = control.steady is Command.START
+        run_since = self.operating.read.hold('run', run)
         # The bridge's own Fwd Run went off after the status bits took their values: a stop.
-        run_dropped = not run and \
-            self.operating.read.hold('run', run) > self.operating.status_since(status)
+        run_dropped = not run and run_since > self.operating.status_since(status)
         return self.starter.decide(status, state_byte, run_dropped,
                                    bool(self.image and self.image.fwd_run))
 

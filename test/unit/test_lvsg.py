@@ -1,13 +1,13 @@
 """Unit tests of the LVSG codec (manual 002's tables) and the MCD 200 gateway profile."""
 
-from drive_bridge.devices.contracts import FixedControl, TRIP_CODE_UNKNOWN
+from drive_bridge.devices.contracts import FixedControl, SlowReadouts, TRIP_CODE_UNKNOWN
 from drive_bridge.devices.lvsg import LvsgProfile
 from drive_bridge.errors import CommandRefused, ModelMismatch
 from drive_bridge.protocol import lvsg, words
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.lvsg import Control
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister, WriteRegisters
-from fakes import drive_cycle
+from fakes import drive_cycle, FakeClock
 import pytest
 
 
@@ -215,3 +215,111 @@ def test_wrong_product_type_is_a_model_mismatch():
     poll(profile, answer(0, 0))
     with pytest.raises(ModelMismatch, match='product type 7'):
         poll(profile, answer(1, (7 << 3) << 8))
+
+
+# -- the freshest information decides (issue 26) ---------------------------------------------
+STATE_STARTING, STATE_RUNNING, STATE_STOPPING = 0x42, 0x43, 0x44  # flags: rotation validated
+NO_TRIP_WORD = lvsg.NO_TRIP << 8
+
+
+def slow_never_due():
+    """Slow readouts that are not due again (a fake clock that never moves): stale on purpose."""
+    return SlowReadouts(1000.0, FakeClock())
+
+
+def running_with_a_stale_starting_byte():
+    """A started MCD 202 whose state byte was read during the start ramp, not since."""
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
+                          slow_readouts=slow_never_due())
+    start = FixedControl(Command.START)
+    poll(profile, answer(0, 0))  # first contact
+    poll(profile, answer(1, (4 << 3) << 8 | 3))
+    poll(profile, answer(2, NO_TRIP_WORD | 1))
+    _, reading = poll(profile, answer(3, 0, ready=False, on=True, ramping=True), control=start)
+    assert reading.state == 'starting'
+    _, reading = poll(profile, answer(2, NO_TRIP_WORD | STATE_STARTING, ready=False, on=True,
+                                      ramping=True), control=start)
+    assert reading.state == 'starting' and reading.details['mcd200_state'] == '2'
+    for parameter in (3, 4, 3):  # running: the byte is not read again (not due)
+        _, reading = poll(profile, answer(parameter, 80, ready=False, on=True), control=start)
+        assert reading.state == 'running'
+    return profile
+
+
+def test_a_soft_stop_is_stopping_though_the_state_byte_read_last_says_starting():
+    profile = running_with_a_stale_starting_byte()
+    # The stop: On and Ramping again; the answer is parameter 4, the byte still the start's.
+    items, reading = poll(profile, answer(4, 30, ready=False, on=True, ramping=True),
+                          control=FixedControl(Command.STOP))
+    assert reading.state == 'stopping'
+    assert 'mcd200_state' not in reading.details  # not current: not shown as current
+    assert profile.operating.request == lvsg.PARAMETER_STATE  # asked for next
+    items, reading = poll(profile, answer(2, NO_TRIP_WORD | STATE_STOPPING, ready=False,
+                                          on=True, ramping=True),
+                          control=FixedControl(Command.STOP))
+    assert written_control(items[0][1]).parameter_request == lvsg.PARAMETER_STATE
+    assert reading.state == 'stopping' and reading.details['mcd200_state'] == '4'
+    _, reading = poll(profile, answer(3, 0), control=FixedControl(Command.STOP))
+    assert reading.state == 'ready'
+
+
+def test_a_start_is_starting_though_the_state_byte_read_last_says_stopping():
+    profile = running_with_a_stale_starting_byte()
+    stop = FixedControl(Command.STOP)
+    poll(profile, answer(4, 30, ready=False, on=True, ramping=True), control=stop)
+    poll(profile, answer(2, NO_TRIP_WORD | STATE_STOPPING, ready=False, on=True, ramping=True),
+         control=stop)
+    for parameter in (3, 4):  # stopped: the byte is not read again
+        _, reading = poll(profile, answer(parameter, 0), control=stop)
+        assert reading.state == 'ready'
+    _, reading = poll(profile, answer(3, 300, ready=False, on=True, ramping=True),
+                      control=FixedControl(Command.START))
+    assert reading.state == 'starting'
+
+
+def test_a_stop_during_the_start_ramp_is_stopping_at_once():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
+                          slow_readouts=slow_never_due())
+    poll(profile, answer(0, 0))
+    poll(profile, answer(1, (4 << 3) << 8 | 3))
+    poll(profile, answer(2, NO_TRIP_WORD | 1))
+    ramp = {'ready': False, 'on': True, 'ramping': True}
+    poll(profile, answer(3, 300, **ramp), control=FixedControl(Command.START))
+    _, reading = poll(profile, answer(2, NO_TRIP_WORD | STATE_STARTING, **ramp),
+                      control=FixedControl(Command.START))
+    assert reading.state == 'starting'
+    # The bridge drops its Fwd Run during the ramp: the status bits do not change (still
+    # On and Ramping), the byte read before the stop does not count.
+    _, reading = poll(profile, answer(3, 200, **ramp), control=FixedControl(Command.STOP))
+    assert reading.state == 'stopping'
+
+
+def test_a_trip_is_not_named_by_the_trip_code_of_an_earlier_one():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
+                          slow_readouts=slow_never_due())
+    poll(profile, answer(0, 0))
+    poll(profile, answer(1, (4 << 3) << 8 | 3))
+    poll(profile, answer(2, NO_TRIP_WORD | 1))
+    tripped = {'ready': False, 'fault': True}
+    poll(profile, answer(3, 0, **tripped))
+    _, reading = poll(profile, answer(2, 3 << 8 | 6, **tripped))
+    assert (reading.trip_code, reading.trip_name) == (3, 'Motor thermistor')
+    for parameter in (3, 4):  # reset: ready again, the byte (trip 3) is not read again
+        _, reading = poll(profile, answer(parameter, 0))
+        assert reading.state == 'ready' and reading.trip_code == 0
+    _, reading = poll(profile, answer(3, 0, **tripped))  # another trip
+    assert reading.trip_code == TRIP_CODE_UNKNOWN and 'not read yet' in reading.trip_name
+    assert profile.operating.request == lvsg.PARAMETER_STATE
+    _, reading = poll(profile, answer(2, 2 << 8 | 6, **tripped))
+    assert (reading.trip_code, reading.trip_name) == (2, 'Motor overload')
+
+
+def test_a_comms_failure_read_before_the_status_changed_is_not_reported_after_it():
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
+                          slow_readouts=slow_never_due())
+    poll(profile, answer(0, 0, ready=False))
+    poll(profile, answer(1, (4 << 3) << 8 | 3, ready=False))
+    _, reading = poll(profile, answer(2, NO_TRIP_WORD | 0x80, ready=False))  # state 0, bit 7
+    assert reading.state == 'unknown' and reading.fault.startswith('communication failure')
+    _, reading = poll(profile, answer(3, 0))  # Ready: the module talks to the starter again
+    assert reading.state == 'ready' and not reading.fault
