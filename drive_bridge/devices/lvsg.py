@@ -62,20 +62,24 @@ def fill_trip(reading: DeviceReading, trip_code: Optional[int], extended: bool) 
 
 class OperatingParameters:
     """
-    The extended module's operating parameters: which to ask for next, and what was read.
+    What was read of one MCD 200 and when: the operating parameters and the fast signals.
 
     Current and temperature (parameters 3, 4) take turns every poll; product and state (1,
     2) come in when the slow readouts are due and until each was read once. Each answer is
-    kept with the poll that read it (:class:`Freshness`), and the status bits and the
-    command in force are noted every poll: the state (2) counts only while it is current,
-    read at or after the newest change of either, and is asked for next whenever it is not
-    (after a trip: until it names the trip).
+    kept with the poll that read it (:class:`Freshness`). The status bits and the command in
+    force when they were read are noted every poll (:meth:`note`): the state (2) counts only
+    while it is current, read with or after the status bits' newest change and after the
+    command's (a byte read in the poll a command went out may not show it yet), and it is
+    asked for next whenever it is not current (after a trip: until it names the trip).
     """
 
     def __init__(self, slow_readouts: SlowReadouts):
         self.slow_readouts = slow_readouts
         self.request = lvsg.PARAMETER_PRODUCT
         self.read = Freshness()
+        self.status_since = 0  # the poll since which the status bits have their values
+        self.state_since = 1  # the first poll whose state byte is current
+        self.run_dropped = False  # the bridge's Fwd Run went off after the status changed
         self._slow_turn = 0
 
     def forget(self) -> None:
@@ -83,27 +87,28 @@ class OperatingParameters:
         self.read.forget()
         self.request = lvsg.PARAMETER_PRODUCT
 
-    def newest_change(self, status: lvsg.Status, steady: Optional[Command]) -> int:
-        """Return the poll of the newest change of the status bits or the command in force."""
-        return max(self.status_since(status), self.read.hold('command', steady))
+    def note(self, status: lvsg.Status, steady: Optional[Command]) -> None:
+        """Note the status bits just read and the command in force when they were read."""
+        read = self.read
+        self.status_since = read.hold('status', (status.ready, status.on, status.fault,
+                                                 status.ramping))
+        self.state_since = max(self.status_since, read.hold('command', steady) + 1)
+        run = steady is Command.START
+        run_since = read.hold('run', run)  # noted every poll, running or not
+        self.run_dropped = not run and run_since > self.status_since
 
-    def status_since(self, status: lvsg.Status) -> int:
-        """Return the poll since which the status bits have their present values."""
-        return self.read.hold('status', (status.ready, status.on, status.fault,
-                                         status.ramping))
+    def state_parameter(self) -> Optional[int]:
+        """Return parameter 2 (trip code, state byte) if it is current, else None."""
+        return self.read.current(lvsg.PARAMETER_STATE, self.state_since)
 
-    def state_parameter(self, since: int) -> Optional[int]:
-        """Return parameter 2 (trip code, state byte) if read in poll ``since`` or later."""
-        return self.read.current(lvsg.PARAMETER_STATE, since)
-
-    def take_answer(self, status: lvsg.Status, since: int) -> None:
+    def take_answer(self, status: lvsg.Status) -> None:
         """Keep the answer to the request in force and choose the next request."""
         if status.parameter == self.request and not status.invalid_parameter:
             self.read.take(self.request, status.value)
             self.request = self._next_request()
         if status.invalid_parameter and status.parameter == lvsg.PARAMETER_STATE:
             return  # refused: asking again would starve the others
-        state = self.state_parameter(since)  # None: not current
+        state = self.state_parameter()  # None: not current
         outdated = state is None and self.read.read_in(lvsg.PARAMETER_STATE) is not None
         trip_unknown = status.fault and (state is None or state >> 8 == lvsg.NO_TRIP)
         if outdated or trip_unknown:
@@ -314,13 +319,13 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             raise ProtocolError('input image missing from the replies')
         status = lvsg.decode_status(registers_to_bytes(registers, self.input_bytes,
                                                        self.byte_order))
+        self.operating.note(status, control.steady)  # in force when the status was read
         if self.extended:
-            self.operating.take_answer(
-                status, self.operating.newest_change(status, control.steady))
+            self.operating.take_answer(status)
         if control.steady is None:  # asked again: a command may have gone out meanwhile
             yield from self._clear_unasked_fwd_run(status, control)
         self._resolve_model()
-        return self._reading(status, control)
+        return self._reading(status)
 
     def _clear_unasked_fwd_run(self, status: lvsg.Status, control: ControlView):
         """Write Fwd Run clear if the gateway holds it for a starter that is not on."""
@@ -361,13 +366,13 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             raise ModelMismatch(f'model mismatch: configured {self.configured_model} but the '
                                 'slave reads current 2222 and temperature 111, as an MCD 201')
 
-    def _reading(self, status: lvsg.Status, control: ControlView) -> DeviceReading:
+    def _reading(self, status: lvsg.Status) -> DeviceReading:
         operating = self.operating
-        since = operating.newest_change(status, control.steady)  # asked again: see poll
-        state_value = operating.state_parameter(since)  # None: not current
+        state_value = operating.state_parameter()  # None: not current
         trip_code, state_byte = lvsg.split_state_parameter(state_value) \
             if state_value is not None else (None, None)
-        reading = DeviceReading(state=self._state(status, state_byte, control),
+        reading = DeviceReading(state=self.starter.decide(
+            status, state_byte, operating.run_dropped, bool(self.image and self.image.fwd_run)),
                                 status_word=status_word(status))
         if status.fault:
             fill_trip(reading, trip_code, self.extended)
@@ -386,16 +391,6 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         if self.hazard:
             reading.fault = self.hazard + (f'; {reading.fault}' if reading.fault else '')
         return reading
-
-    def _state(self, status: lvsg.Status, state_byte: Optional[int],
-               control: ControlView) -> str:
-        """Return the starter's state (``state_byte``: None unless current)."""
-        run = control.steady is Command.START
-        run_since = self.operating.read.hold('run', run)
-        # The bridge's own Fwd Run went off after the status bits took their values: a stop.
-        run_dropped = not run and run_since > self.operating.status_since(status)
-        return self.starter.decide(status, state_byte, run_dropped,
-                                   bool(self.image and self.image.fwd_run))
 
     def _details(self, status: lvsg.Status, state_byte: Optional[int]) -> Dict[str, str]:
         details = {

@@ -223,31 +223,63 @@ NO_TRIP_WORD = lvsg.NO_TRIP << 8
 
 
 def slow_never_due():
-    """Slow readouts that are not due again (a fake clock that never moves): stale on purpose."""
-    return SlowReadouts(1000.0, FakeClock())
+    """Return slow readouts that are never due (their fake clock never moves)."""
+    slow = SlowReadouts(1000.0, FakeClock())
+    slow.due()  # the first poll that asks reads them: that one is gone
+    return slow
+
+
+def poll_until_state_byte(profile, clock, state_byte, control, **status):
+    """
+    Poll until the profile took ``state_byte``; return the reading.
+
+    The slow readouts are due every poll and the gateway answers each request in the poll
+    that wrote it (current 200 A, temperature 40 %, product MCD 200).
+    """
+    values = {1: (4 << 3) << 8 | 3, 2: NO_TRIP_WORD | state_byte, 3: 200, 4: 40}
+    requested = [0]
+
+    def reply(request):
+        if request == ReadRegisters(profile.input_register, profile.input_registers):
+            return image(answer(requested[-1], values.get(requested[-1], 0), **status))
+        if isinstance(request, WriteRegisters):
+            requested.append(request.values[1] >> 8)
+        elif isinstance(request, WriteRegister):
+            requested.append(request.value >> 8)
+        return None
+    for _ in range(10):
+        clock.sleep(1.0)
+        _, reading = drive_cycle(profile, reply, control)
+        if reading.details.get('mcd200_state') == str(state_byte & 0x0F):
+            return reading
+    raise AssertionError(f'state byte {state_byte:#x} never asked for')
 
 
 def running_with_a_stale_starting_byte():
-    """A started MCD 202 whose state byte was read during the start ramp, not since."""
+    """
+    Return a started MCD 202 whose state byte was read during the start ramp, not since.
+
+    The gateway answers the current and temperature requests only while it runs (it had not
+    passed a newer request on yet), and the slow readouts' clock stands still.
+    """
+    clock = FakeClock()
     profile = LvsgProfile('mcd202', input_register=0, output_register=100,
-                          slow_readouts=slow_never_due())
+                          slow_readouts=SlowReadouts(1.0, clock))
     start = FixedControl(Command.START)
     poll(profile, answer(0, 0))  # first contact
     poll(profile, answer(1, (4 << 3) << 8 | 3))
     poll(profile, answer(2, NO_TRIP_WORD | 1))
-    _, reading = poll(profile, answer(3, 0, ready=False, on=True, ramping=True), control=start)
+    reading = poll_until_state_byte(profile, clock, STATE_STARTING, start, ready=False,
+                                    on=True, ramping=True)
     assert reading.state == 'starting'
-    _, reading = poll(profile, answer(2, NO_TRIP_WORD | STATE_STARTING, ready=False, on=True,
-                                      ramping=True), control=start)
-    assert reading.state == 'starting' and reading.details['mcd200_state'] == '2'
-    for parameter in (3, 4, 3):  # running: the byte is not read again (not due)
+    for parameter in (3, 4, 3):  # running: the byte is not read again
         _, reading = poll(profile, answer(parameter, 80, ready=False, on=True), control=start)
         assert reading.state == 'running'
-    return profile
+    return profile, clock
 
 
 def test_a_soft_stop_is_stopping_though_the_state_byte_read_last_says_starting():
-    profile = running_with_a_stale_starting_byte()
+    profile, _ = running_with_a_stale_starting_byte()
     # The stop: On and Ramping again; the answer is parameter 4, the byte still the start's.
     items, reading = poll(profile, answer(4, 30, ready=False, on=True, ramping=True),
                           control=FixedControl(Command.STOP))
@@ -264,11 +296,11 @@ def test_a_soft_stop_is_stopping_though_the_state_byte_read_last_says_starting()
 
 
 def test_a_start_is_starting_though_the_state_byte_read_last_says_stopping():
-    profile = running_with_a_stale_starting_byte()
+    profile, clock = running_with_a_stale_starting_byte()
     stop = FixedControl(Command.STOP)
-    poll(profile, answer(4, 30, ready=False, on=True, ramping=True), control=stop)
-    poll(profile, answer(2, NO_TRIP_WORD | STATE_STOPPING, ready=False, on=True, ramping=True),
-         control=stop)
+    reading = poll_until_state_byte(profile, clock, STATE_STOPPING, stop, ready=False, on=True,
+                                    ramping=True)
+    assert reading.state == 'stopping'
     for parameter in (3, 4):  # stopped: the byte is not read again
         _, reading = poll(profile, answer(parameter, 0), control=stop)
         assert reading.state == 'ready'

@@ -87,7 +87,7 @@ def test_lvsg_current_and_temperature_take_turns_product_and_state_once_a_period
     requests = []
     values = {1: (4 << 3) << 8 | 3, 2: 255 << 8 | 1, 3: 50, 4: 20}
     for _ in range(12):
-        request = profile.request
+        request = profile.operating.request
         requests.append(request)
         status = lvsg.encode_status(True, False, False, False, 0,
                                     (request, values[request], False))
