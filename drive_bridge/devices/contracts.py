@@ -248,6 +248,10 @@ class Freshness:
         read = self._read.get(key)
         return read is not None and read[1] >= since
 
+    def drop(self, key: Any) -> None:
+        """Forget the value of ``key`` (the device refused to read it)."""
+        self._read.pop(key, None)
+
     def forget(self) -> None:
         """Forget every value and signal (offline: the device may come back as another)."""
         self._read.clear()
