@@ -13,6 +13,10 @@ the next step only when it is about to send it, so a write built from the contro
 drives' keepalive) always carries what is in force at that moment, even when a command was
 sent between two steps of the same cycle.
 
+What a profile reads slowly (in turn, once a readout period) it keeps with the poll that read
+it (:class:`Freshness`): such a value decides or refines a state, a trip or a published field
+only while it is at least as fresh as the fast values it would override.
+
 Optional capabilities are abstract classes that a profile class inherits explicitly; the bus
 asks ``isinstance(profile, Capability)`` and never probes attributes:
 

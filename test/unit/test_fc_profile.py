@@ -390,3 +390,20 @@ def test_an_alarm_word_read_during_a_trip_is_read_again_after_the_reset():
     answers.update(status=status_coils(0x0607), alarm_word=[0, 0])  # reset
     _, reading = run_poll(profile, answers)
     assert (reading.state, reading.trip_code, reading.alarm_word) == ('ready', 0, 0)
+
+
+def test_a_start_with_a_0_percent_reference_reads_running_at_0_hz():
+    """Manual 004 5.6.4: bit 11 is set by a start signal, bit 8 when the speed is the reference."""
+    model = make_model()
+    model.write_control(fc_control.START_WORD, 0, 0.0)  # start, reference 0 %
+    model.advance(1.0)
+    status = StatusWord(model.status_word())
+    assert model.output_pct == 0.0 and model.motor_current_a() == 0.0
+    assert status.flag(fc_control.STW_RUNNING) and status.flag(fc_control.STW_ON_REFERENCE)
+    profile = DriveProfile(fc.DATA, 'fc51')
+    started = FixedControl(Command.START, 0)
+    reading = profile.reading(model.status_word(), model.actual_word(), started)
+    assert reading.state == 'running' and reading.speed_feedback_pct == 0.0
+    model.write_control(fc_control.RAMP_STOP_WORD, 0, 1.0)  # no start signal: ready
+    assert profile.reading(model.status_word(), model.actual_word(),
+                           FixedControl(Command.STOP)).state == 'ready'
