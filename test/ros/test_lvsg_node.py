@@ -6,9 +6,9 @@ from drive_bridge.sim.mcd_model import READY, RUNNING
 from ros_helpers import RosClient, start_node, stop_node, write_params
 
 
-def test_lvsg_start_trip_reset_quick_stop(tmp_path):
-    server = make_lvsg_gateway({0: ('mcd202', 100, 'extended')}, start_time_s=0.5,
-                               stop_time_s=0.5)
+def gateway_and_node(tmp_path, **starter):
+    """Serve an MCD 202 (extended module) behind a gateway; return (server, node, client)."""
+    server = make_lvsg_gateway({0: ('mcd202', 100, 'extended')}, **starter)
     port = server.open_tcp()
     server.start()
     params = write_params(tmp_path / 'lvsg.yaml', {'protocol': 'modbus_tcp', 'tcp_port': port,
@@ -16,8 +16,11 @@ def test_lvsg_start_trip_reset_quick_stop(tmp_path):
                           {'mixer': {'family': 'lvsg', 'address': 1, 'poll_rate': 10.0,
                                      'gateway_input_register': 0,
                                      'gateway_output_register': 100}})
-    process = start_node(params)
-    client = RosClient(['mixer'])
+    return server, start_node(params), RosClient(['mixer'])
+
+
+def test_lvsg_start_trip_reset_quick_stop(tmp_path):
+    server, process, client = gateway_and_node(tmp_path, start_time_s=0.5, stop_time_s=0.5)
     slave = server.devices[1].slaves[0]
     try:
         assert client.wait_state('mixer', 'ready', 15.0)
@@ -55,17 +58,7 @@ def test_lvsg_extended_a_stop_is_stopping_never_starting(tmp_path):
     the first running reading, before its turn comes again. The simulated starter's own
     states, sampled while the test waits, must be the same sequence.
     """
-    server = make_lvsg_gateway({0: ('mcd202', 100, 'extended')}, start_time_s=3.0,
-                               stop_time_s=1.0)
-    port = server.open_tcp()
-    server.start()
-    params = write_params(tmp_path / 'lvsg.yaml', {'protocol': 'modbus_tcp', 'tcp_port': port,
-                                                   'timeout': 0.3},
-                          {'mixer': {'family': 'lvsg', 'address': 1, 'poll_rate': 10.0,
-                                     'gateway_input_register': 0,
-                                     'gateway_output_register': 100}})
-    process = start_node(params)
-    client = RosClient(['mixer'])
+    server, process, client = gateway_and_node(tmp_path, start_time_s=3.0, stop_time_s=1.0)
     model = server.devices[1].slaves[0].model
     starter = []  # the simulated starter's states, as the test saw them change
 

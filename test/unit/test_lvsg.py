@@ -229,6 +229,15 @@ def slow_never_due():
     return slow
 
 
+def ready_mcd202(slow_readouts=None, **status):
+    """Return an MCD 202 profile that has read product and state (ready, or ``status``)."""
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
+                          slow_readouts=slow_readouts or slow_never_due())
+    poll(profile, answer(0, 0, **status))  # first contact
+    poll(profile, answer(1, (4 << 3) << 8 | 3, **status))
+    return profile
+
+
 def poll_until_state_byte(profile, clock, state_byte, control, **status):
     """
     Poll until the profile took ``state_byte``; return the reading.
@@ -263,11 +272,8 @@ def running_with_a_stale_starting_byte():
     passed a newer request on yet), and the slow readouts' clock stands still.
     """
     clock = FakeClock()
-    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
-                          slow_readouts=SlowReadouts(1.0, clock))
+    profile = ready_mcd202(SlowReadouts(1.0, clock))
     start = FixedControl(Command.START)
-    poll(profile, answer(0, 0))  # first contact
-    poll(profile, answer(1, (4 << 3) << 8 | 3))
     poll(profile, answer(2, NO_TRIP_WORD | 1))
     reading = poll_until_state_byte(profile, clock, STATE_STARTING, start, ready=False,
                                     on=True, ramping=True)
@@ -310,10 +316,7 @@ def test_a_start_is_starting_though_the_state_byte_read_last_says_stopping():
 
 
 def test_a_stop_during_the_start_ramp_is_stopping_at_once():
-    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
-                          slow_readouts=slow_never_due())
-    poll(profile, answer(0, 0))
-    poll(profile, answer(1, (4 << 3) << 8 | 3))
+    profile = ready_mcd202()
     poll(profile, answer(2, NO_TRIP_WORD | 1))
     ramp = {'ready': False, 'on': True, 'ramping': True}
     poll(profile, answer(3, 300, **ramp), control=FixedControl(Command.START))
@@ -327,10 +330,7 @@ def test_a_stop_during_the_start_ramp_is_stopping_at_once():
 
 
 def test_a_trip_is_not_named_by_the_trip_code_of_an_earlier_one():
-    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
-                          slow_readouts=slow_never_due())
-    poll(profile, answer(0, 0))
-    poll(profile, answer(1, (4 << 3) << 8 | 3))
+    profile = ready_mcd202()
     poll(profile, answer(2, NO_TRIP_WORD | 1))
     tripped = {'ready': False, 'fault': True}
     poll(profile, answer(3, 0, **tripped))
@@ -347,10 +347,7 @@ def test_a_trip_is_not_named_by_the_trip_code_of_an_earlier_one():
 
 
 def test_a_comms_failure_read_before_the_status_changed_is_not_reported_after_it():
-    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
-                          slow_readouts=slow_never_due())
-    poll(profile, answer(0, 0, ready=False))
-    poll(profile, answer(1, (4 << 3) << 8 | 3, ready=False))
+    profile = ready_mcd202(ready=False)
     _, reading = poll(profile, answer(2, NO_TRIP_WORD | 0x80, ready=False))  # state 0, bit 7
     assert reading.state == 'unknown' and reading.fault.startswith('communication failure')
     _, reading = poll(profile, answer(3, 0))  # Ready: the module talks to the starter again
