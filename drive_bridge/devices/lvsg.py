@@ -371,9 +371,9 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         state_value = operating.state_parameter()  # None: not current
         trip_code, state_byte = lvsg.split_state_parameter(state_value) \
             if state_value is not None else (None, None)
-        reading = DeviceReading(state=self.starter.decide(
-            status, state_byte, operating.run_dropped, bool(self.image and self.image.fwd_run)),
-                                status_word=status_word(status))
+        state = self.starter.decide(status, state_byte, operating.run_dropped,
+                                    bool(self.image and self.image.fwd_run))
+        reading = DeviceReading(state=state, status_word=status_word(status))
         if status.fault:
             fill_trip(reading, trip_code, self.extended)
         if self.resolved_model != 'mcd201':
