@@ -13,6 +13,10 @@ the next step only when it is about to send it, so a write built from the contro
 drives' keepalive) always carries what is in force at that moment, even when a command was
 sent between two steps of the same cycle.
 
+What a profile reads slowly (in turn, once a readout period) it keeps with the poll that read
+it (:class:`Freshness`): such a value decides or refines a state, a trip or a published field
+only while it is at least as fresh as the fast values it would override.
+
 Optional capabilities are abstract classes that a profile class inherits explicitly; the bus
 asks ``isinstance(profile, Capability)`` and never probes attributes:
 
@@ -193,6 +197,69 @@ class SlowReadouts:
             return False
         self._next_s = now + self.period_s
         return True
+
+
+class Freshness:
+    """
+    What a profile read, each value stamped with the poll that read it: the freshest decides.
+
+    A profile counts its polls (:meth:`begin_poll`), keeps each slowly read value with the
+    number of the poll that read it (:meth:`take`), and notes every poll the fast signals it
+    reads or is given (the status bits, the command in force) with :meth:`hold`, which says
+    since which poll a signal has had its present value. A slow value may decide or refine
+    something only while it is :meth:`current`: read at or after the poll in which the
+    newest of the fast signals it would override took its value. An LVSG state byte read
+    during a start says nothing about the ramp that began when the motor was stopped later,
+    and an alarm word read before a trip does not name that trip.
+    """
+
+    def __init__(self) -> None:
+        self.poll = 0
+        self._read: Dict[Any, Tuple[Any, int]] = {}  # key -> (value, poll that read it)
+        self._held: Dict[Any, Tuple[Any, int]] = {}  # signal -> (value, poll it began)
+
+    def begin_poll(self) -> int:
+        """Count a new poll; return its number."""
+        self.poll += 1
+        return self.poll
+
+    def take(self, key: Any, value: Any) -> None:
+        """Keep ``value`` of ``key``, read in this poll."""
+        self._read[key] = (value, self.poll)
+
+    def get(self, key: Any, default: Any = None) -> Any:
+        """Return the last value read of ``key``, however old (``default``: never read)."""
+        return self._read[key][0] if key in self._read else default
+
+    def read_in(self, key: Any) -> Optional[int]:
+        """Return the poll that last read ``key`` (None: never read)."""
+        return self._read[key][1] if key in self._read else None
+
+    def hold(self, signal: Any, value: Any) -> int:
+        """Note a fast signal's value in this poll; return the poll since which it has it."""
+        held = self._held.get(signal)
+        if held is None or held[0] != value:
+            held = self._held[signal] = (value, self.poll)
+        return held[1]
+
+    def current(self, key: Any, since: int, default: Any = None) -> Any:
+        """Return the value of ``key`` if it was read in poll ``since`` or later, else default."""
+        read = self._read.get(key)
+        return read[0] if read is not None and read[1] >= since else default
+
+    def is_current(self, key: Any, since: int) -> bool:
+        """Return whether ``key`` was read in poll ``since`` or later."""
+        read = self._read.get(key)
+        return read is not None and read[1] >= since
+
+    def drop(self, key: Any) -> None:
+        """Forget the value of ``key`` (the device refused to read it)."""
+        self._read.pop(key, None)
+
+    def forget(self) -> None:
+        """Forget every value and signal (offline: the device may come back as another)."""
+        self._read.clear()
+        self._held.clear()
 
 
 class DeviceProfile(ABC):

@@ -16,9 +16,9 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
 from drive_bridge.devices.contracts import (
-    CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, ParameterAccess,
-    ParameterOptions, ParameterPlan, PollCycle, PollStep, SetupWrites, SlowReadouts,
-    SpeedReference, TRIP_CODE_UNKNOWN)
+    CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Freshness,
+    ParameterAccess, ParameterOptions, ParameterPlan, PollCycle, PollStep, SetupWrites,
+    SlowReadouts, SpeedReference, TRIP_CODE_UNKNOWN)
 from drive_bridge.devices.parameters import (
     decode_value, encode_value, parameter_address, ParameterSpec, TEXT)
 from drive_bridge.errors import (
@@ -36,6 +36,17 @@ COIL_CONTROL = 0  # coils 1-16 control word, 17-32 reference
 COIL_STATUS = 32  # coils 33-48 status word, 49-64 main actual value (output frequency)
 PROCESS_COILS = 32
 ALWAYS_READ = ('motor_current',)  # every poll; the other readouts take turns
+
+
+def witnesses(status: StatusWord) -> Dict[str, bool]:
+    """
+    Return, per readout a status bit witnesses, whether the bit says it has something.
+
+    Such a readout counts only while current: read since its bit took its present value (an
+    alarm word read before a trip does not name that trip, nor one read during a trip the
+    state after the reset), and it is read at once when it has something or is not current.
+    """
+    return {'alarm_word': status.tripped, 'warning_word': status.flag(fc_control.STW_WARNING)}
 
 
 @dataclass(frozen=True)
@@ -136,7 +147,8 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         self.reached_reference = False
         self.identity: Dict[str, str] = {}
         self._identified = data.identify_parameter is None
-        self._values: Dict[str, object] = {}
+        self.read = Freshness()  # the readouts, each with the poll that read it
+        self._witnessed: Dict[str, int] = {}  # readout -> the poll since which it is current
         self._readouts: Dict[str, Dict[str, ParameterSpec]] = {}
         self._rotation = 0
         self.slow_readouts = slow_readouts or SlowReadouts(0.0)
@@ -174,7 +186,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
     def on_offline(self) -> None:
         """Forget every value read: the drive may come back as another one."""
         self.reached_reference = False
-        self._values.clear()
+        self.read.forget()
         self._identified = self.data.identify_parameter is None
 
     def identity_parameters(self) -> Tuple[Tuple[str, int], ...]:
@@ -194,18 +206,28 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         self._rotation += 1
         return name
 
-    def follow_up_readouts(self, status: StatusWord, read: List[str]) -> List[str]:
-        """Return the readouts to fetch now because the drive trips or warns (not yet read)."""
+    def take_status(self, status: StatusWord, read: List[str]) -> List[str]:
+        """
+        Note the status word just read; return the readouts to fetch at once (not in ``read``).
+
+        Those a status bit witnesses (:func:`witnesses`) when the bit is set (trip, warning)
+        or when the value read is older than the bit's present value.
+        """
         wanted = []
-        if status.tripped:
-            wanted.append('alarm_word')
-        if status.flag(fc_control.STW_WARNING):
-            wanted.append('warning_word')
+        for name, on in witnesses(status).items():
+            self._witnessed[name] = self.read.hold(name, on)
+            stale = self.read.read_in(name) is not None and self.current(name) is None
+            if on or stale:
+                wanted.append(name)
         return [name for name in wanted if name in self.readouts and name not in read]
 
     def take_readout(self, name: str, value: object) -> None:
-        """Keep the decoded value of readout ``name`` (display units)."""
-        self._values[name] = value
+        """Keep the decoded value of readout ``name`` (display units), read in this poll."""
+        self.read.take(name, value)
+
+    def current(self, name: str) -> object:
+        """Return readout ``name`` as last read, or None where its status bit changed since."""
+        return self.read.current(name, self._witnessed.get(name, 0))
 
     def take_identity(self, results: Dict[str, object]) -> None:
         """Take the identity replies (text, or the error that refused the read)."""
@@ -249,14 +271,14 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         return reading
 
     def _fill_readouts(self, reading: DeviceReading) -> None:
-        values = self._values
-        if 'motor_current' in values:
+        values = {name: self.current(name) for name in self.readouts}
+        if values.get('motor_current') is not None:
             reading.motor_current_a = float(values['motor_current']) * self.current_scale
-        if 'motor_thermal' in values:
+        if values.get('motor_thermal') is not None:
             reading.motor_temperature_pct = float(values['motor_thermal'])
-        if 'alarm_word' in values:
+        if values.get('alarm_word') is not None:
             reading.alarm_word = int(values['alarm_word'])
-        if 'warning_word' in values:
+        if values.get('warning_word') is not None:
             reading.warning_word = int(values['warning_word'])
 
     def _fill_trip(self, reading: DeviceReading, status: StatusWord) -> None:
@@ -285,12 +307,14 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         details['control_word_sent'] = self.describe_control(control)
         details['reference_word'] = f'0x{control.reference_word:04X}'
         details['reference_pct'] = f'{fc_scaling.word_to_percent(control.reference_word):g}'
-        for name, value in self._values.items():
-            details[name] = f'{value:g}' if isinstance(value, float) else str(value)
+        for name in self.readouts:
+            value = self.current(name)
+            if value is not None:
+                details[name] = f'{value:g}' if isinstance(value, float) else str(value)
         reading.warnings.extend(status.warnings())
         if reading.warning_word:
             details['warnings'] = _bit_names(reading.warning_word, self.data.warning_bits)
-        extended = self._values.get('extended_status')
+        extended = self.current('extended_status')
         if isinstance(extended, int):
             details['extended_status'] = _bit_names(extended, self.data.extended_status_bits)
         if not status.bus_control:
@@ -368,6 +392,7 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
     # -- polling ------------------------------------------------------------------------
     def poll(self, control: ControlView) -> PollCycle:
         """Return one cycle (see the class docstring)."""
+        self.read.begin_poll()
         identity = {}
         for key, number in self.identity_parameters():
             identity[key] = yield PollStep(self._read(self.data.spec(number)), optional=True)
@@ -385,7 +410,7 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
         rotating = self.next_rotating_readout()
         if rotating is not None:
             read.append(rotating)
-        read += self.follow_up_readouts(StatusWord(status_word), read)
+        read += self.take_status(StatusWord(status_word), read)
         for name in read:
             spec = self.readouts[name]
             registers = yield PollStep(self._read(spec))

@@ -59,6 +59,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
     # -- polling ------------------------------------------------------------------------
     def poll(self, control: ControlView) -> PollCycle:
         """One telegram: control word and reference in, status and one readout back."""
+        self.read.begin_poll()
         identity = {}
         for key, number in self.identity_parameters():
             result = yield PollStep(self._read_request(self.data.spec(number)), optional=True)
@@ -80,7 +81,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
         else:
             self.take_readout(name, self._value(spec, reply))
         status = StatusWord(reply.pcd1)
-        self._follow_up = self.follow_up_readouts(status, [name])
+        self._follow_up = self.take_status(status, [name])
         return self.reading(reply.pcd1, reply.pcd2, control)
 
     def _next_readout(self) -> str:
@@ -96,6 +97,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
     def take_readout_error(self, name: str, error: DeviceException) -> None:
         """Note a readout the drive refused (the reading goes on without it)."""
         self.identity[f'{name}_error'] = self.explain_exception(error.code)
+        self.read.drop(name)  # not current, nor asked for again but by its turn or its bit
 
     def _identity_value(self, number: int, result: Any) -> Any:
         if isinstance(result, FcTelegram):

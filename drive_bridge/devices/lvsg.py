@@ -18,8 +18,8 @@ from dataclasses import replace
 from typing import Any, Dict, FrozenSet, Mapping, Optional
 
 from drive_bridge.devices.contracts import (
-    CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Family, PollCycle,
-    PollStep, SlowReadouts, TRIP_CODE_UNKNOWN)
+    CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Family, Freshness,
+    PollCycle, PollStep, SlowReadouts, TRIP_CODE_UNKNOWN)
 from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
 from drive_bridge.protocol import lvsg
 from drive_bridge.protocol.commands import Command
@@ -40,6 +40,165 @@ GATEWAY_EXCEPTIONS: Dict[int, str] = {
     3: 'illegal data value',
     4: 'gateway failure',
 }
+
+
+def status_word(status: lvsg.Status) -> int:
+    """Return the status bytes as the contract's status word (byte 1 high)."""
+    data = lvsg.encode_status(status.ready, status.on, status.fault, status.ramping,
+                              status.current_raw)
+    return data[1] << 8 | data[0]
+
+
+def fill_trip(reading: DeviceReading, trip_code: Optional[int], extended: bool) -> None:
+    """Name a trip by a trip code read since it began (None: none; an older one is another's)."""
+    if trip_code not in (None, lvsg.NO_TRIP):
+        reading.trip_code, reading.trip_name = trip_code, lvsg.trip_name(trip_code)
+    else:
+        reading.trip_code = TRIP_CODE_UNKNOWN
+        reading.trip_name = 'tripped (trip code not known: ' + (
+            'not read yet)' if extended else 'read it in the diagnostic telegram)')
+    reading.fault = f'tripped: {reading.trip_name}'
+
+
+class OperatingParameters:
+    """
+    What was read of one MCD 200 and when: the operating parameters and the fast signals.
+
+    Current and temperature (parameters 3, 4) take turns every poll; product and state (1,
+    2) come in when the slow readouts are due and until each was read once. Each answer is
+    kept with the poll that read it (:class:`Freshness`). The status bits and the command in
+    force when they were read are noted every poll (:meth:`note`): the state (2) counts only
+    while it is current, read with or after the status bits' newest change and after the
+    command's (a byte read in the poll a command went out may not show it yet), and it is
+    asked for next whenever it is not current (after a trip: until it names the trip).
+    """
+
+    def __init__(self, slow_readouts: SlowReadouts):
+        self.slow_readouts = slow_readouts
+        self.request = lvsg.PARAMETER_PRODUCT
+        self.read = Freshness()
+        self.status_since = 0  # the poll since which the status bits have their values
+        self.state_since = 1  # the first poll whose state byte is current
+        self.run_dropped = False  # the bridge's Fwd Run went off after the status changed
+        self._slow_turn = 0
+
+    def forget(self) -> None:
+        """Forget every answer and signal (offline)."""
+        self.read.forget()
+        self.request = lvsg.PARAMETER_PRODUCT
+
+    def note(self, status: lvsg.Status, steady: Optional[Command]) -> None:
+        """Note the status bits just read and the command in force when they were read."""
+        read = self.read
+        self.status_since = read.hold('status', (status.ready, status.on, status.fault,
+                                                 status.ramping))
+        self.state_since = max(self.status_since, read.hold('command', steady) + 1)
+        run = steady is Command.START
+        run_since = read.hold('run', run)  # noted every poll, running or not
+        self.run_dropped = not run and run_since > self.status_since
+
+    def state_parameter(self) -> Optional[int]:
+        """Return parameter 2 (trip code, state byte) if it is current, else None."""
+        return self.read.current(lvsg.PARAMETER_STATE, self.state_since)
+
+    def take_answer(self, status: lvsg.Status) -> None:
+        """Keep the answer to the request in force and choose the next request."""
+        if status.parameter == self.request and not status.invalid_parameter:
+            self.read.take(self.request, status.value)
+            self.request = self._next_request()
+        if status.invalid_parameter and status.parameter == lvsg.PARAMETER_STATE:
+            return  # refused: asking again would starve the others
+        state = self.state_parameter()  # None: not current
+        outdated = state is None and self.read.read_in(lvsg.PARAMETER_STATE) is not None
+        trip_unknown = status.fault and (state is None or state >> 8 == lvsg.NO_TRIP)
+        if outdated or trip_unknown:
+            self.request = lvsg.PARAMETER_STATE
+
+    def reported_model(self) -> Optional[str]:
+        """
+        Return the model the answers tell (None: not read yet).
+
+        An MCD 201 by its placeholders (current 2222, temperature 111), else an MCD 202;
+        raise ModelMismatch for a product type that is not an MCD 200.
+        """
+        product = self.read.get(lvsg.PARAMETER_PRODUCT)
+        if product is None:
+            return None
+        if lvsg.product_type(product) != lvsg.MCD200_PRODUCT_TYPE:
+            raise ModelMismatch(
+                f'model mismatch: the slave reports product type {lvsg.product_type(product)} '
+                f'(operating parameter 1), not 4 = MCD 200; check the gateway mapping')
+        current = self.read.get(lvsg.PARAMETER_CURRENT)
+        temperature = self.read.get(lvsg.PARAMETER_TEMPERATURE)
+        if current is None or temperature is None:
+            return None
+        is_201 = current == lvsg.MCD201_CURRENT_PLACEHOLDER and \
+            temperature & 0xFF == lvsg.MCD201_TEMPERATURE_PLACEHOLDER
+        return 'mcd201' if is_201 else 'mcd202'
+
+    def _next_request(self) -> int:
+        slow = (lvsg.PARAMETER_PRODUCT, lvsg.PARAMETER_STATE)
+        unread = [number for number in slow if self.read.read_in(number) is None]
+        if unread:
+            return unread[0]
+        if self.request == lvsg.PARAMETER_CURRENT:
+            return lvsg.PARAMETER_TEMPERATURE
+        if self.request == lvsg.PARAMETER_TEMPERATURE and self.slow_readouts.due():
+            self._slow_turn = (self._slow_turn + 1) % len(slow)
+            return slow[self._slow_turn]
+        return lvsg.PARAMETER_CURRENT
+
+
+class StarterState:
+    """
+    The contract's state of an MCD 200, decided by the freshest information.
+
+    The status bits (Ready, On, Fault, Ramping) are read every poll, but cannot tell a start
+    ramp from a stop ramp, nor a restart delay from another not-ready. The MCD 200 state of
+    parameter 2 can, but it is read in turn: it refines the status bits only while current
+    (read since their newest change and the command's). Otherwise a ramp's direction comes
+    from what happened last: the bridge's own Fwd Run dropped after the ramp began (a soft
+    stop), else the state before the ramp (a starter that was not running is starting,
+    whoever started it); at first contact, the Fwd Run the gateway holds.
+    """
+
+    def __init__(self) -> None:
+        self.last = ''  # the state last decided ('' before first contact)
+
+    def decide(self, status: lvsg.Status, state_byte: Optional[int], run_dropped: bool,
+               gateway_fwd_run: bool) -> str:
+        """
+        Return the state and remember it.
+
+        ``state_byte``: parameter 2's low byte if current, else None. ``run_dropped``: the
+        bridge's Fwd Run went off after the status bits took their present values.
+        """
+        self.last = self._decide(status, state_byte, run_dropped, gateway_fwd_run)
+        return self.last
+
+    def _decide(self, status: lvsg.Status, state_byte: Optional[int], run_dropped: bool,
+                gateway_fwd_run: bool) -> str:
+        known = lvsg.MCD200_STATES.get(state_byte & 0x0F) if state_byte is not None else None
+        if status.fault:
+            return 'tripped'
+        if status.on and status.ramping:
+            if known in ('starting', 'stopping'):
+                return known
+            return 'stopping' if run_dropped else self._ramp_direction(gateway_fwd_run)
+        if status.on:
+            return 'running'
+        if status.ready:
+            return 'ready'
+        return known if known in ('restart_delay', 'unknown') else 'not_ready'
+
+    def _ramp_direction(self, gateway_fwd_run: bool) -> str:
+        if self.last in ('starting', 'stopping'):
+            return self.last
+        if self.last == 'running':
+            return 'stopping'
+        if self.last:
+            return 'starting'
+        return 'starting' if gateway_fwd_run else 'stopping'
 
 
 class LvsgProfile(DeviceProfile, CyclicControl):
@@ -68,12 +227,9 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         self.output_bytes = lvsg.EXTENDED_OUTPUT_BYTES if self.extended else \
             lvsg.BASIC_OUTPUT_BYTES
         self.image: Optional[Control] = None  # the gateway's control bits (None: not read yet)
-        self.request = lvsg.PARAMETER_PRODUCT
-        self.values: Dict[int, int] = {}
+        self.operating = OperatingParameters(slow_readouts or SlowReadouts(0.0))
+        self.starter = StarterState()
         self.hazard = ''
-        self.last_state = ''  # the state last reported ('' before first contact)
-        self.slow_readouts = slow_readouts or SlowReadouts(0.0)
-        self._slow_turn = 0
 
     @property
     def input_registers(self) -> int:
@@ -95,10 +251,9 @@ class LvsgProfile(DeviceProfile, CyclicControl):
     def on_offline(self) -> None:
         """Forget the image and the answers: after a reconnect the image is read again."""
         self.image = None
-        self.values.clear()
-        self.request = lvsg.PARAMETER_PRODUCT
+        self.operating.forget()
+        self.starter = StarterState()
         self.hazard = ''
-        self.last_state = ''
 
     # -- the image --------------------------------------------------------------------------
     @staticmethod
@@ -118,7 +273,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
     def image_write(self, control: Control) -> Request:
         """Return the write of the whole output image carrying ``control``."""
         registers = bytes_to_registers(
-            replace(control, parameter_request=self.request).encode(self.extended),
+            replace(control, parameter_request=self.operating.request).encode(self.extended),
             self.byte_order)
         if len(registers) == 1:
             return WriteRegister(self.output_register, registers[0])
@@ -146,6 +301,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         set restarts the motor): the image is written back with Fwd Run clear, the one write
         allowed before a command, or reported as a hazard when nothing may be written.
         """
+        self.operating.read.begin_poll()
         first_contact = self.image is None
         if first_contact:
             self._adopt((yield PollStep(ReadRegisters(self.output_register,
@@ -163,8 +319,9 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             raise ProtocolError('input image missing from the replies')
         status = lvsg.decode_status(registers_to_bytes(registers, self.input_bytes,
                                                        self.byte_order))
+        self.operating.note(status, control.steady)  # in force when the status was read
         if self.extended:
-            self._take_answer(status)
+            self.operating.take_answer(status)
         if control.steady is None:  # asked again: a command may have gone out meanwhile
             yield from self._clear_unasked_fwd_run(status, control)
         self._resolve_model()
@@ -199,75 +356,31 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             control = Control()
         self.image = replace(control, reset=False)
 
-    def _take_answer(self, status: lvsg.Status) -> None:
-        """
-        Keep the answer to the request in force and choose the next request.
-
-        Current and temperature (parameters 3, 4) take turns every poll; product and state
-        (1, 2) come in when the slow readouts are due and until each was read once; after a
-        trip the state (with the trip code) is asked for next.
-        """
-        if status.parameter == self.request and not status.invalid_parameter:
-            self.values[self.request] = status.value
-            self.request = self._next_request()
-        state = self.values.get(lvsg.PARAMETER_STATE)
-        trip_known = state is not None and state >> 8 != lvsg.NO_TRIP
-        if status.fault and not trip_known:
-            self.request = lvsg.PARAMETER_STATE  # a trip: ask for the trip code next
-
-    def _next_request(self) -> int:
-        slow = (lvsg.PARAMETER_PRODUCT, lvsg.PARAMETER_STATE)
-        unread = [number for number in slow if number not in self.values]
-        if unread:
-            return unread[0]
-        if self.request == lvsg.PARAMETER_CURRENT:
-            return lvsg.PARAMETER_TEMPERATURE
-        if self.request == lvsg.PARAMETER_TEMPERATURE and self.slow_readouts.due():
-            self._slow_turn = (self._slow_turn + 1) % len(slow)
-            return slow[self._slow_turn]
-        return lvsg.PARAMETER_CURRENT
-
     def _resolve_model(self) -> None:
-        product = self.values.get(lvsg.PARAMETER_PRODUCT)
-        if product is None:
+        reported = self.operating.reported_model()
+        if reported is None:
             return
-        if lvsg.product_type(product) != lvsg.MCD200_PRODUCT_TYPE:
-            raise ModelMismatch(
-                f'model mismatch: the slave reports product type {lvsg.product_type(product)} '
-                f'(operating parameter 1), not 4 = MCD 200; check the gateway mapping')
-        current = self.values.get(lvsg.PARAMETER_CURRENT)
-        temperature = self.values.get(lvsg.PARAMETER_TEMPERATURE)
-        if current is None or temperature is None:
-            return
-        is_201 = current == lvsg.MCD201_CURRENT_PLACEHOLDER and \
-            temperature & 0xFF == lvsg.MCD201_TEMPERATURE_PLACEHOLDER
-        reported = 'mcd201' if is_201 else 'mcd202'
         if self.configured_model == 'auto':
             self.resolved_model = reported
-        elif reported != self.configured_model and is_201:
+        elif reported != self.configured_model and reported == 'mcd201':
             raise ModelMismatch(f'model mismatch: configured {self.configured_model} but the '
                                 'slave reads current 2222 and temperature 111, as an MCD 201')
 
     def _reading(self, status: lvsg.Status) -> DeviceReading:
-        state_value = self.values.get(lvsg.PARAMETER_STATE)
+        operating = self.operating
+        state_value = operating.state_parameter()  # None: not current
         trip_code, state_byte = lvsg.split_state_parameter(state_value) \
             if state_value is not None else (None, None)
-        reading = DeviceReading(state=self._state(status, state_byte),
-                                status_word=self._status_word(status))
+        state = self.starter.decide(status, state_byte, operating.run_dropped,
+                                    bool(self.image and self.image.fwd_run))
+        reading = DeviceReading(state=state, status_word=status_word(status))
         if status.fault:
-            if trip_code not in (None, lvsg.NO_TRIP):
-                reading.trip_code, reading.trip_name = trip_code, lvsg.trip_name(trip_code)
-            else:
-                reading.trip_code = TRIP_CODE_UNKNOWN
-                reading.trip_name = 'tripped (trip code not known: ' + (
-                    'read it in the diagnostic telegram)' if not self.extended
-                    else 'not read yet)')
-            reading.fault = f'tripped: {reading.trip_name}'
+            fill_trip(reading, trip_code, self.extended)
         if self.resolved_model != 'mcd201':
-            current = self.values.get(lvsg.PARAMETER_CURRENT)
+            current = operating.read.get(lvsg.PARAMETER_CURRENT)
             if current is not None:
                 reading.motor_current_a = float(current) * self.current_scale
-            temperature = self.values.get(lvsg.PARAMETER_TEMPERATURE)
+            temperature = operating.read.get(lvsg.PARAMETER_TEMPERATURE)
             if temperature is not None:
                 reading.motor_temperature_pct = float(temperature & 0xFF)
         reading.details = self._details(status, state_byte)
@@ -279,46 +392,6 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             reading.fault = self.hazard + (f'; {reading.fault}' if reading.fault else '')
         return reading
 
-    def _state(self, status: lvsg.Status, state_byte: Optional[int]) -> str:
-        state = self._state_now(status, state_byte)
-        self.last_state = state
-        return state
-
-    def _state_now(self, status: lvsg.Status, state_byte: Optional[int]) -> str:
-        known = lvsg.MCD200_STATES.get(state_byte & 0x0F) if state_byte is not None else None
-        if status.fault:
-            return 'tripped'
-        if status.on and status.ramping:
-            if known in ('starting', 'stopping'):
-                return known
-            return self._ramp_direction()
-        if status.on:
-            return 'running'
-        if status.ready:
-            return 'ready'
-        return known if known in ('restart_delay', 'unknown') else 'not_ready'
-
-    def _ramp_direction(self) -> str:
-        """
-        Tell a start ramp from a stop ramp without a state byte (the basic module).
-
-        By the state before the ramp (a starter that was not running is starting, whoever
-        started it); at first contact, by the Fwd Run the gateway holds.
-        """
-        if self.last_state in ('starting', 'stopping'):
-            return self.last_state
-        if self.last_state == 'running':
-            return 'stopping'
-        if self.last_state:
-            return 'starting'
-        return 'starting' if self.image is not None and self.image.fwd_run else 'stopping'
-
-    @staticmethod
-    def _status_word(status: lvsg.Status) -> int:
-        data = lvsg.encode_status(status.ready, status.on, status.fault, status.ramping,
-                                  status.current_raw)
-        return data[1] << 8 | data[0]
-
     def _details(self, status: lvsg.Status, state_byte: Optional[int]) -> Dict[str, str]:
         details = {
             'model': self.resolved_model or 'auto (waiting for operating parameters)',
@@ -329,7 +402,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             'gateway_fwd_run': str(bool(self.image and self.image.fwd_run)),
             'gateway_quick_stop': str(bool(self.image and self.image.quick_stop)),
         }
-        product = self.values.get(lvsg.PARAMETER_PRODUCT)
+        product = self.operating.read.get(lvsg.PARAMETER_PRODUCT)
         if product is not None:
             details['product_type'] = str(lvsg.product_type(product))
             details['software_version'] = str(product & 0xFF)

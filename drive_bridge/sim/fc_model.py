@@ -234,7 +234,16 @@ class FcModel:
         return word
 
     def status_word(self) -> int:
-        """Return the FC-profile status word (manual 004 section 5.6.3)."""
+        """
+        Return the FC-profile status word (manual 004 sections 5.6.3 and 5.6.4).
+
+        Bit 11 *Running* is 1 when "the frequency converter has a start signal or ... the
+        output frequency is higher than 0 Hz", and bit 8 *Speed = reference* when "the
+        present motor speed matches the preset speed reference": a drive started with a 0 %
+        reference sets both at 0 Hz, so it reads running, not ready. The VLT option card
+        manual (003) does not describe the status bits; the VLT variant follows the same FC
+        profile.
+        """
         bits = {
             ctl.STW_CONTROL_READY: not self.tripped,
             ctl.STW_UNIT_READY: True,

@@ -3,7 +3,8 @@
 import math
 
 from drive_bridge.devices import fc
-from drive_bridge.devices.contracts import FixedControl, ParameterOptions, TRIP_CODE_UNKNOWN
+from drive_bridge.devices.contracts import (
+    FixedControl, ParameterOptions, SlowReadouts, TRIP_CODE_UNKNOWN)
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.parameters import decode_value, encode_value, FC_CONVERSION_FACTORS
 from drive_bridge.errors import CommandRefused, DeviceException, ModelMismatch
@@ -14,7 +15,7 @@ from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.fc_model import FcModel, FcSimConfig, ParameterError
-from fakes import drive_cycle
+from fakes import drive_cycle, FakeClock
 import pytest
 
 
@@ -353,3 +354,56 @@ def test_a_start_read_before_the_drive_moves_is_still_starting_once_it_ramps():
     assert profile.reading(0x0E07, 0x0400, started).state == 'starting'  # ramping
     assert profile.reading(0x0F07, 0x1999, started).state == 'running'  # on reference
     assert profile.reading(0x0E07, 0x1800, started).state == 'running'  # a later change
+
+
+# -- the freshest information decides (issue 26) ---------------------------------------------
+def slow_never_due():
+    """Return slow readouts that are never due (their fake clock never moves)."""
+    slow = SlowReadouts(1000.0, FakeClock())
+    slow.due()  # the first poll that asks reads them: that one is gone
+    return slow
+
+
+def test_a_warning_word_read_during_a_warning_is_read_again_when_it_ends():
+    profile = DriveProfile(fc.DATA, 'fc51', slow_readouts=slow_never_due())
+    profile._identified = True
+    answers = {'status': status_coils(0x0607 | 0x80), 'motor_current': [0, 0],
+               'warning_word': [0, 1 << 5]}
+    items, reading = run_poll(profile, answers)
+    assert reading.warning_word == 32 and reading.details['warnings'] == 'Over current'
+    # The warning bit clears: the warning word read during it is not published again.
+    answers.update(status=status_coils(0x0607), warning_word=[0, 0])
+    items, reading = run_poll(profile, answers)
+    assert 'warning_word' in [key for key, _ in items]  # read again in this poll
+    assert reading.warning_word == 0 and 'warnings' not in reading.details
+    items, reading = run_poll(profile, answers)
+    assert [key for key, _ in items] == ['status', 'motor_current']  # current: not again
+
+
+def test_an_alarm_word_read_during_a_trip_is_read_again_after_the_reset():
+    profile = DriveProfile(fc.DATA, 'fc51', slow_readouts=slow_never_due())
+    profile._identified = True
+    answers = {'status': status_coils(0x0608), 'motor_current': [0, 0],
+               'alarm_word': [0, 1 << 5]}
+    _, reading = run_poll(profile, answers)
+    assert (reading.trip_code, reading.alarm_word) == (13, 32)
+    answers.update(status=status_coils(0x0607), alarm_word=[0, 0])  # reset
+    _, reading = run_poll(profile, answers)
+    assert (reading.state, reading.trip_code, reading.alarm_word) == ('ready', 0, 0)
+
+
+def test_a_start_with_a_0_percent_reference_reads_running_at_0_hz():
+    """Manual 004 5.6.4: bit 11 is set by a start signal, bit 8 when the speed is the reference."""
+    model = make_model()
+    model.write_control(fc_control.START_WORD, 0, 0.0)  # start, reference 0 %
+    model.advance(1.0)
+    status = StatusWord(model.status_word())
+    assert model.output_pct == 0.0 and model.motor_current_a() == 0.0
+    assert status.flag(fc_control.STW_RUNNING) and status.flag(fc_control.STW_ON_REFERENCE)
+    profile = DriveProfile(fc.DATA, 'fc51')
+    started = FixedControl(Command.START, 0)
+    reading = profile.reading(model.status_word(), model.actual_word(), started)
+    assert reading.state == 'running' and reading.speed_feedback_pct == 0.0
+    model.write_control(fc_control.RAMP_STOP_WORD, 0, 1.0)  # no start signal: ready
+    assert profile.reading(model.status_word(), model.actual_word(),
+                           FixedControl(Command.STOP)).state == 'ready'

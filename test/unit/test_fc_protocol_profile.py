@@ -2,13 +2,13 @@
 
 from drive_bridge.config import build_config
 from drive_bridge.devices import fc, vlt
-from drive_bridge.devices.contracts import FixedControl, ParameterOptions
+from drive_bridge.devices.contracts import FixedControl, ParameterOptions, SlowReadouts
 from drive_bridge.devices.fc_protocol_drive import FcProtocolDriveProfile
 from drive_bridge.errors import CommandRefused, ConfigError, DeviceException
 from drive_bridge.protocol import fc_telegram as fcp
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.fc_control import RAMP_STOP_WORD, START_WORD
-from fakes import drive_cycle
+from fakes import drive_cycle, FakeClock
 import pytest
 
 READY, RUNNING, TRIPPED = 0x0607, 0x0F07, 0x0608
@@ -136,3 +136,33 @@ def test_fc_protocol_defaults_are_8e1_with_a_two_character_gap():
                           {'d': {'family': 'fc', 'address': 1}})
     assert config.link.describe().endswith('9600 E1')
     assert config.timing.frame_gap_s == pytest.approx(2 * 11 / 9600)
+
+
+def test_a_trip_is_not_named_by_the_alarm_word_of_an_earlier_one():
+    slow = SlowReadouts(1000.0, FakeClock())
+    slow.due()  # never due again: the alarm word is read only because of a trip
+    profile = FcProtocolDriveProfile(fc.DATA, 'fc51', slow_readouts=slow)
+    profile._identified = True
+    over_current, timeout = 1 << 5, 1 << 4
+    drive_cycle(profile, answer(TRIPPED))  # the status shows the trip
+    requests, reading = drive_cycle(profile, answer(TRIPPED, values={1690: over_current}))
+    assert requests[0].pnu == 1690 and reading.trip_code == 13
+    _, reset = drive_cycle(profile, answer(READY))  # reset
+    # Another trip at once: the alarm word read during the first one does not name it.
+    requests, reading = drive_cycle(profile, answer(TRIPPED, values={1690: timeout}))
+    assert (reading.trip_code, reading.trip_name) == (17, 'Control word timeout')
+    assert requests[0].pnu == 1690  # asked for again as soon as the first trip ended
+    assert reset.trip_code == 0 and reset.alarm_word is None  # read before the reset
+
+
+def test_a_warning_word_read_during_a_warning_is_not_published_after_it():
+    profile = FcProtocolDriveProfile(fc.DATA, 'fc51')
+    profile._identified = True
+    warning = READY | 0x80
+    drive_cycle(profile, answer(warning))  # the status shows the warning
+    requests, reading = drive_cycle(profile, answer(warning, values={1692: 1 << 5}))
+    assert requests[0].pnu == 1692 and reading.warning_word == 32
+    _, reading = drive_cycle(profile, answer(READY))  # the warning ends
+    assert reading.warning_word is None and 'warnings' not in reading.details
+    requests, reading = drive_cycle(profile, answer(READY))
+    assert requests[0].pnu == 1692 and reading.warning_word == 0  # read again at once

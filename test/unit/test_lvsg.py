@@ -1,13 +1,13 @@
 """Unit tests of the LVSG codec (manual 002's tables) and the MCD 200 gateway profile."""
 
-from drive_bridge.devices.contracts import FixedControl, TRIP_CODE_UNKNOWN
+from drive_bridge.devices.contracts import FixedControl, SlowReadouts, TRIP_CODE_UNKNOWN
 from drive_bridge.devices.lvsg import LvsgProfile
 from drive_bridge.errors import CommandRefused, ModelMismatch
 from drive_bridge.protocol import lvsg, words
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.lvsg import Control
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister, WriteRegisters
-from fakes import drive_cycle
+from fakes import drive_cycle, FakeClock
 import pytest
 
 
@@ -141,7 +141,7 @@ def test_a_trip_asks_for_the_trip_code_next():
     profile = LvsgProfile('mcd202', input_register=0, output_register=100)
     poll(profile, answer(0, 0))
     _, reading = poll(profile, answer(0, 0, ready=False, fault=True))
-    assert profile.request == lvsg.PARAMETER_STATE
+    assert profile.operating.request == lvsg.PARAMETER_STATE
     assert reading.trip_code == TRIP_CODE_UNKNOWN  # tripped, code not read yet: never 0
     _, reading = poll(profile, answer(2, 2 << 8 | 6, ready=False, fault=True))
     assert (reading.state, reading.trip_code, reading.trip_name) == ('tripped', 2,
@@ -215,3 +215,140 @@ def test_wrong_product_type_is_a_model_mismatch():
     poll(profile, answer(0, 0))
     with pytest.raises(ModelMismatch, match='product type 7'):
         poll(profile, answer(1, (7 << 3) << 8))
+
+
+# -- the freshest information decides (issue 26) ---------------------------------------------
+STATE_STARTING, STATE_RUNNING, STATE_STOPPING = 0x42, 0x43, 0x44  # flags: rotation validated
+NO_TRIP_WORD = lvsg.NO_TRIP << 8
+
+
+def slow_never_due():
+    """Return slow readouts that are never due (their fake clock never moves)."""
+    slow = SlowReadouts(1000.0, FakeClock())
+    slow.due()  # the first poll that asks reads them: that one is gone
+    return slow
+
+
+def ready_mcd202(slow_readouts=None, **status):
+    """Return an MCD 202 profile that has read product and state (ready, or ``status``)."""
+    profile = LvsgProfile('mcd202', input_register=0, output_register=100,
+                          slow_readouts=slow_readouts or slow_never_due())
+    poll(profile, answer(0, 0, **status))  # first contact
+    poll(profile, answer(1, (4 << 3) << 8 | 3, **status))
+    return profile
+
+
+def poll_until_state_byte(profile, clock, state_byte, control, **status):
+    """
+    Poll until the profile took ``state_byte``; return the reading.
+
+    The slow readouts are due every poll and the gateway answers each request in the poll
+    that wrote it (current 200 A, temperature 40 %, product MCD 200).
+    """
+    values = {1: (4 << 3) << 8 | 3, 2: NO_TRIP_WORD | state_byte, 3: 200, 4: 40}
+    requested = [0]
+
+    def reply(request):
+        if request == ReadRegisters(profile.input_register, profile.input_registers):
+            return image(answer(requested[-1], values.get(requested[-1], 0), **status))
+        if isinstance(request, WriteRegisters):
+            requested.append(request.values[1] >> 8)
+        elif isinstance(request, WriteRegister):
+            requested.append(request.value >> 8)
+        return None
+    for _ in range(10):
+        clock.sleep(1.0)
+        _, reading = drive_cycle(profile, reply, control)
+        if reading.details.get('mcd200_state') == str(state_byte & 0x0F):
+            return reading
+    raise AssertionError(f'state byte {state_byte:#x} never asked for')
+
+
+def running_with_a_stale_starting_byte():
+    """
+    Return a started MCD 202 whose state byte was read during the start ramp, not since.
+
+    The gateway answers the current and temperature requests only while it runs (it had not
+    passed a newer request on yet), and the slow readouts' clock stands still.
+    """
+    clock = FakeClock()
+    profile = ready_mcd202(SlowReadouts(1.0, clock))
+    start = FixedControl(Command.START)
+    poll(profile, answer(2, NO_TRIP_WORD | 1))
+    reading = poll_until_state_byte(profile, clock, STATE_STARTING, start, ready=False,
+                                    on=True, ramping=True)
+    assert reading.state == 'starting'
+    for parameter in (3, 4, 3):  # running: the byte is not read again
+        _, reading = poll(profile, answer(parameter, 80, ready=False, on=True), control=start)
+        assert reading.state == 'running'
+    return profile, clock
+
+
+def test_a_soft_stop_is_stopping_though_the_state_byte_read_last_says_starting():
+    profile, _ = running_with_a_stale_starting_byte()
+    # The stop: On and Ramping again; the answer is parameter 4, the byte still the start's.
+    items, reading = poll(profile, answer(4, 30, ready=False, on=True, ramping=True),
+                          control=FixedControl(Command.STOP))
+    assert reading.state == 'stopping'
+    assert 'mcd200_state' not in reading.details  # not current: not shown as current
+    assert profile.operating.request == lvsg.PARAMETER_STATE  # asked for next
+    items, reading = poll(profile, answer(2, NO_TRIP_WORD | STATE_STOPPING, ready=False,
+                                          on=True, ramping=True),
+                          control=FixedControl(Command.STOP))
+    assert written_control(items[0][1]).parameter_request == lvsg.PARAMETER_STATE
+    assert reading.state == 'stopping' and reading.details['mcd200_state'] == '4'
+    _, reading = poll(profile, answer(3, 0), control=FixedControl(Command.STOP))
+    assert reading.state == 'ready'
+
+
+def test_a_start_is_starting_though_the_state_byte_read_last_says_stopping():
+    profile, clock = running_with_a_stale_starting_byte()
+    stop = FixedControl(Command.STOP)
+    reading = poll_until_state_byte(profile, clock, STATE_STOPPING, stop, ready=False, on=True,
+                                    ramping=True)
+    assert reading.state == 'stopping'
+    for parameter in (3, 4):  # stopped: the byte is not read again
+        _, reading = poll(profile, answer(parameter, 0), control=stop)
+        assert reading.state == 'ready'
+    _, reading = poll(profile, answer(3, 300, ready=False, on=True, ramping=True),
+                      control=FixedControl(Command.START))
+    assert reading.state == 'starting'
+
+
+def test_a_stop_during_the_start_ramp_is_stopping_at_once():
+    profile = ready_mcd202()
+    poll(profile, answer(2, NO_TRIP_WORD | 1))
+    ramp = {'ready': False, 'on': True, 'ramping': True}
+    poll(profile, answer(3, 300, **ramp), control=FixedControl(Command.START))
+    _, reading = poll(profile, answer(2, NO_TRIP_WORD | STATE_STARTING, **ramp),
+                      control=FixedControl(Command.START))
+    assert reading.state == 'starting'
+    # The bridge drops its Fwd Run during the ramp: the status bits do not change (still
+    # On and Ramping), the byte read before the stop does not count.
+    _, reading = poll(profile, answer(3, 200, **ramp), control=FixedControl(Command.STOP))
+    assert reading.state == 'stopping'
+
+
+def test_a_trip_is_not_named_by_the_trip_code_of_an_earlier_one():
+    profile = ready_mcd202()
+    poll(profile, answer(2, NO_TRIP_WORD | 1))
+    tripped = {'ready': False, 'fault': True}
+    poll(profile, answer(3, 0, **tripped))
+    _, reading = poll(profile, answer(2, 3 << 8 | 6, **tripped))
+    assert (reading.trip_code, reading.trip_name) == (3, 'Motor thermistor')
+    for parameter in (3, 4):  # reset: ready again, the byte (trip 3) is not read again
+        _, reading = poll(profile, answer(parameter, 0))
+        assert reading.state == 'ready' and reading.trip_code == 0
+    _, reading = poll(profile, answer(3, 0, **tripped))  # another trip
+    assert reading.trip_code == TRIP_CODE_UNKNOWN and 'not read yet' in reading.trip_name
+    assert profile.operating.request == lvsg.PARAMETER_STATE
+    _, reading = poll(profile, answer(2, 2 << 8 | 6, **tripped))
+    assert (reading.trip_code, reading.trip_name) == (2, 'Motor overload')
+
+
+def test_a_comms_failure_read_before_the_status_changed_is_not_reported_after_it():
+    profile = ready_mcd202(ready=False)
+    _, reading = poll(profile, answer(2, NO_TRIP_WORD | 0x80, ready=False))  # state 0, bit 7
+    assert reading.state == 'unknown' and reading.fault.startswith('communication failure')
+    _, reading = poll(profile, answer(3, 0))  # Ready: the module talks to the starter again
+    assert reading.state == 'ready' and not reading.fault

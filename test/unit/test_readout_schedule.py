@@ -2,7 +2,7 @@
 
 from drive_bridge.config import build_config
 from drive_bridge.devices import fc, mcd
-from drive_bridge.devices.contracts import SlowReadouts
+from drive_bridge.devices.contracts import Freshness, SlowReadouts
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.lvsg import LvsgProfile
 from drive_bridge.devices.mcd_ascii import McdAsciiProfile
@@ -87,7 +87,7 @@ def test_lvsg_current_and_temperature_take_turns_product_and_state_once_a_period
     requests = []
     values = {1: (4 << 3) << 8 | 3, 2: 255 << 8 | 1, 3: 50, 4: 20}
     for _ in range(12):
-        request = profile.request
+        request = profile.operating.request
         requests.append(request)
         status = lvsg.encode_status(True, False, False, False, 0,
                                     (request, values[request], False))
@@ -106,3 +106,24 @@ def test_the_readout_period_is_a_device_setting_of_every_family():
     device = {'family': 'fc', 'address': 1, 'readout_period': 2.5}
     config = build_config({'devices': ['a']}, {'a': device})
     assert config.devices[0].make_spec().profile.slow_readouts.period_s == 2.5
+
+
+def test_a_value_read_counts_only_from_the_poll_its_fast_signal_took_its_value():
+    read = Freshness()
+    read.begin_poll()
+    read.take('state', 'starting')
+    assert read.hold('ramping', True) == 1
+    read.begin_poll()
+    assert read.hold('ramping', True) == 1  # unchanged: still since poll 1
+    assert read.current('state', read.hold('ramping', True)) == 'starting'
+    read.begin_poll()
+    since = read.hold('ramping', False)  # changed in poll 3: the value read in 1 is older
+    assert since == 3 and read.current('state', since) is None
+    assert read.get('state') == 'starting' and read.read_in('state') == 1  # kept, not current
+    read.take('state', 'running')
+    assert read.is_current('state', since) and read.current('state', since) == 'running'
+    read.drop('state')
+    assert read.get('state') is None and not read.is_current('state', 0)
+    read.forget()
+    read.begin_poll()
+    assert read.hold('ramping', False) == 4  # forgotten: a new signal

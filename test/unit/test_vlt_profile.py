@@ -2,7 +2,7 @@
 
 from drive_bridge import config
 from drive_bridge.devices import vlt
-from drive_bridge.devices.contracts import FixedControl, ParameterOptions
+from drive_bridge.devices.contracts import FixedControl, ParameterOptions, SlowReadouts
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.parameters import decode_value
 from drive_bridge.errors import CommandRefused, ConfigError
@@ -11,6 +11,7 @@ from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.requests import ReadRegisters, WriteCoil, WriteRegister
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.fc_model import FcModel, FcSimConfig
+from fakes import drive_cycle, FakeClock
 import pytest
 
 
@@ -146,3 +147,23 @@ def test_option_card_sim_exceptions_and_text_mode():
     assert device.handle(rtu.RtuFrame(1, 0x2B, b'\x0e\x01\x00'), 0.0).data == bytes([67])
     assert device.handle(rtu.write_register_request(1, 1, 200), 0.0) is not None
     assert device.model.card_timeouts == [200, 0]
+
+
+def test_the_alarm_word_agrees_with_the_simulated_drive_after_a_reset():
+    """A stale alarm word is never published: after a reset it is read again (issue 26)."""
+    slow = SlowReadouts(1000.0, FakeClock())
+    slow.due()  # never due again: the alarm word is read only because of the trip bits
+    profile = DriveProfile(vlt.DATA, 'vlt6000', slow_readouts=slow)
+    device = FcSimDevice(FcModel(FcSimConfig(model='vlt6000')))
+
+    def answer(request):
+        sent = request.frame(1)
+        return request.parse(sent, device.handle(sent, 0.0))
+    device.model.trip(5, 0.0)
+    _, reading = drive_cycle(profile, answer)
+    assert (reading.trip_code, reading.alarm_word) == (1005, device.model.alarm_word)
+    for step in profile.command_plan(Command.RESET, FixedControl()).writes:
+        answer(step)
+    assert device.model.alarm_word == 0
+    _, reading = drive_cycle(profile, answer)
+    assert (reading.state, reading.trip_code, reading.alarm_word) == ('ready', 0, 0)
