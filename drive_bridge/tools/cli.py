@@ -15,8 +15,9 @@ profile, and an exception 04 is explained with the drive's register 7. Before a 
 first write the device at the address is identified with reads only, as ``scan`` does:
 nothing is written to a device that does not answer as the family and model given (nor to
 a silent address). ``restore`` checks the whole file (device, family, model, every number,
-type, limit and option) before it writes anything. Progress goes to stderr, and only while stderr is a terminal. Exit status:
-0 done, 1 the bus or device failed, 2 a bad argument or file, 130 interrupted (Ctrl-C).
+type, limit and option) before it writes anything. Progress goes to stderr, and only while
+stderr is a terminal. Exit status: 0 done, 1 the bus or device failed, 2 a bad argument
+or file, 130 interrupted (Ctrl-C).
 """
 
 import argparse
@@ -888,10 +889,11 @@ SUBCOMMANDS = {
             'Write one parameter and read it back. The value is checked first against the '
             "model's table (type, limits, options), and the device at the address is asked "
             'what it is, with reads only as scan asks: nothing is written if the value does '
-            'not fit or the device does not answer as the family and model given. A text parameter takes the value as text (1234567890 stays text). Process data '
-            'and control registers (FC 51 50000 CTW ...) are no parameters and are refused: '
-            "use the node's commands. A device configured allow_control: false is refused "
-            'unless --force is given.'),
+            'not fit or the device does not answer as the family and model given. A text '
+            'parameter takes the value as text (1234567890 stays text). Process data and '
+            'control registers (FC 51 50000 CTW ...) are no parameters and are refused: use '
+            "the node's commands. A device configured allow_control: false is refused unless "
+            '--force is given.'),
     'backup': ('save all parameters to YAML and verify',
                "Read every setting of the device (drives: the settings of the model's "
                "table; MCD: parameters 1 to the model's last), read them all again, and "
