@@ -11,10 +11,13 @@ line.yaml --device conv``) or from options (``--port /dev/ttyUSB0 --family fc --
 Every transaction goes through the bus's transaction runner, as in the node: a write to a
 monitor-only device (``allow_control: false``) is refused unless ``--force`` is given for
 that command, a parameter number on process data or control registers is refused by the
-profile, and an exception 04 is explained with the drive's register 7. ``restore`` checks
-the whole file (device, family, model, every number, type, limit and option) before it
-writes anything. Progress goes to stderr, and only while stderr is a terminal. Exit status:
-0 done, 1 the bus or device failed, 2 a bad argument or file, 130 interrupted (Ctrl-C).
+profile, and an exception 04 is explained with the drive's register 7. Before a command's
+first write the device at the address is identified with reads only, as ``scan`` does:
+nothing is written to a device that does not answer as the family and model given (nor to
+a silent address). ``restore`` checks the whole file (device, family, model, every number,
+type, limit and option) before it writes anything. Progress goes to stderr, and only while
+stderr is a terminal. Exit status: 0 done, 1 the bus or device failed, 2 a bad argument
+or file, 130 interrupted (Ctrl-C).
 """
 
 import argparse
@@ -25,7 +28,7 @@ import os
 import sys
 import textwrap
 import time
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 from drive_bridge import config as cfg
 from drive_bridge.bus.device import BusDevice
@@ -47,6 +50,9 @@ from drive_bridge.tools.cli_target import (
 from drive_bridge.transport.protocols import PROTOCOLS
 
 SCAN_FAMILIES = ('fc', 'mcd')  # asked in this order; then the VLT option card (see scan)
+# The families identify() can tell: checked before a write. Not lvsg: behind its gateway
+# the starter's process image answers as no family the reads know.
+IDENTIFIED_FAMILIES = SCAN_FAMILIES + ('vlt',)
 # Exception codes only the VLT option card answers (its drive's FC-protocol error codes and
 # its own 64-67, 255); a Modbus device answers 01-0B.
 OPTION_CARD_CODES = frozenset({0, 17, 64, 65, 66, 67, 130, 131, 255})
@@ -104,8 +110,11 @@ class Session:
         self._owns_port = runner is None  # else a port another session opened (scan)
         self.runner = runner or open_runner(config)
         # The bus settings to ask what answers at the address when the device does not
-        # answer as its family does (None: a probe of scan, which asks that itself).
+        # answer as its family does, and before the first write (None: a probe of scan,
+        # which asks that itself and never writes).
         self.bus = bus
+        self._answer: Optional[Answer] = None
+        self._asked = self._checked = False
         self._polled = False
         self._table: Optional[Dict[int, ParameterSpec]] = None
 
@@ -130,10 +139,10 @@ class Session:
                 what = f' {doing}' if doing else ' it'
                 raise CliError(f'{self.name} refused{what}: '
                                f'{self.runner.explain(self.record, error)}') from None
-            except NoResponse as error:
+            except NoResponse:
                 if not doing:
                     raise
-                raise self.silent(error, doing) from None
+                raise self.silent(doing) from None
             except TransportError as error:
                 if not doing or isinstance(error, LinkDown):
                     raise
@@ -166,7 +175,7 @@ class Session:
         self._polled = True
         return reading
 
-    def silent(self, error: NoResponse, doing: str = '') -> CliError:
+    def silent(self, doing: str = '') -> CliError:
         """Return the CliError of a device that did not answer, naming its address."""
         link = self.config.link
         what = f' to {doing}' if doing else ''
@@ -174,6 +183,14 @@ class Session:
                         f'within {link.timeout_s:g} s ({link.protocol}, {link.describe()}): '
                         'is a device at that address, on this line, with this protocol, baud '
                         'rate and parity?')
+
+    def answer(self) -> Optional['Answer']:
+        """Return what answers at the device's address (asked once, reads only: identify)."""
+        if not self._asked:
+            self._answer = identify(self.bus, self.device.address, self.runner,
+                                    self.config.timing.retries)
+            self._asked = True
+        return self._answer
 
     def check_family(self) -> None:
         """
@@ -185,12 +202,38 @@ class Session:
         """
         if self.bus is None:
             return
-        found = identify(self.bus, self.device.address, self.runner)
-        if found is None or found[0] in (None, self.device.family):
+        found = self.answer()
+        if found is None or found.family in (None, self.device.family):
             return
-        raise CliError(f'{self.name}: address {self.device.address} answers as {found[1]}, '
-                       f'not as family {self.device.family}: give --family {found[0]} (or the '
-                       'right address)', EXIT_USAGE)
+        raise CliError(other_family(self, found), EXIT_USAGE)
+
+    def check_before_writing(self) -> None:
+        """
+        Raise a CliError unless the device at the address answers as its family and model.
+
+        Asked once, before the session's first write, with reads only (:func:`identify`, as
+        ``scan`` asks): a write meant for one register map never lands in another device's.
+        Families the reads cannot identify (lvsg) are not asked; a model the reads cannot
+        tell (VLT 5000 or 6000) is taken as given.
+        """
+        if self._checked or self.bus is None or \
+                self.device.family not in IDENTIFIED_FAMILIES:
+            return
+        found = self.answer()
+        if found is None:
+            raise CliError(f'{self.silent("identify it before writing")} Nothing written.')
+        if found.family != self.device.family:
+            raise CliError(other_family(self, found, '; nothing written'), EXIT_USAGE)
+        configured = self.profile.configured_model
+        if found.model not in (None, configured) and configured != 'auto':
+            try:  # the profile decides what fits its model (an MCD 201 answers as a 202)
+                self.poll()
+            except ModelMismatch:
+                raise CliError(f'{self.name}: address {self.device.address} answers as '
+                               f'{found.words}, not as model {configured}: give --model '
+                               f'{found.model} (or the right address); nothing written',
+                               EXIT_USAGE) from None
+        self._checked = True
 
     def resolve_model(self) -> str:
         """Return the model; with model auto, poll once so that the device tells it."""
@@ -270,10 +313,11 @@ class Session:
         profile = self.require_parameters()
         self.resolve_model()  # model auto: the parameter map depends on what the device is
         plan = profile.parameter_plan(number, value, options)
-        if any(request.writes for request in plan.transactions) and \
-                not self.record.owner.writes_allowed:  # as the node: nothing of the plan sent
-            raise MonitorOnly(f'{self.name} is monitor only (allow_control: false): '
-                              f'{plan.label} not sent')
+        if any(request.writes for request in plan.transactions):
+            if not self.record.owner.writes_allowed:  # as the node: nothing of the plan sent
+                raise MonitorOnly(f'{self.name} is monitor only (allow_control: false): '
+                                  f'{plan.label} not sent')
+            self.check_before_writing()  # e.g. a VLT text parameter's index write (IND)
         results = self.run(plan.transactions, plan.label)
         try:
             return plan.decode(results)
@@ -315,16 +359,24 @@ def with_session(args, action: Callable[[Session], None], writes: bool = False) 
     config, device, bus = make_bus(args)
     if writes:
         config, device = allow_writes(args, config, device)
-    run_session(config, device, bus, action)
+    run_session(config, device, bus, action, writes)
 
 
-def run_session(config, device, bus: Dict[str, Any], action: Callable[[Session], None]) -> None:
-    """Open the bus for ``device``, run ``action``, close the bus; silence names the address."""
+def run_session(config, device, bus: Dict[str, Any], action: Callable[[Session], None],
+                writes: bool = False) -> None:
+    """
+    Open the bus for ``device``, run ``action``, close the bus; silence names the address.
+
+    For a command that ``writes``, the device is identified first (reads only): nothing is
+    written unless it answers as its family and model.
+    """
     session = Session(config, device, bus=bus)
     try:
+        if writes:
+            session.check_before_writing()
         action(session)
-    except NoResponse as error:
-        raise session.silent(error) from None
+    except NoResponse:
+        raise session.silent() from None
     finally:
         session.close()
 
@@ -555,7 +607,8 @@ def command_restore(args, out) -> int:
     if identity:
         warn(f'{"; ".join(identity)}: --force restores it to {device.name} all the same')
     config, device = allow_writes(args, config, device)
-    run_session(config, device, bus, lambda session: restore_checked(session, backup, args, out))
+    run_session(config, device, bus, lambda session: restore_checked(session, backup, args, out),
+                writes=True)
     return EXIT_OK
 
 
@@ -673,12 +726,13 @@ def parse_range(text: str) -> Tuple[int, int]:
 
 
 def probe_session(bus: Dict[str, Any], family: str, address: int,
-                  runner: TransactionRunner) -> Optional[Session]:
+                  runner: TransactionRunner, retries: int = 0) -> Optional[Session]:
     """Return a session with a probe device of ``family`` at ``address``, or None."""
     values = {'family': family, 'address': address,
               'model': 'vlt6000' if family == 'vlt' else 'auto'}
-    try:  # no retries: silence at an address means nobody is there
-        config = cfg.build_config(dict(bus, devices=['probe'], retries=0), {'probe': values})
+    try:  # scan: no retries, silence at an address means nobody is there
+        config = cfg.build_config(dict(bus, devices=['probe'], retries=retries),
+                                  {'probe': values})
     except ConfigError:
         return None  # e.g. an MCD cannot sit at this address
     return Session(config, config.devices[0], runner)
@@ -687,30 +741,50 @@ def probe_session(bus: Dict[str, Any], family: str, address: int,
 def scan_address(bus: Dict[str, Any], address: int, runner: TransactionRunner) -> str:
     """Return what answers at ``address`` in words, or '' if nothing does."""
     found = identify(bus, address, runner)
-    return '' if found is None else found[1]
+    return '' if found is None else found.words
 
 
-def identify(bus: Dict[str, Any], address: int, runner: TransactionRunner) \
-        -> Optional[Tuple[Optional[str], str]]:
+class Answer(NamedTuple):
+    """What answers at an address, as :func:`identify` tells it."""
+
+    family: Optional[str]  # None: something answers, but as none of the families asked
+    words: str  # e.g. 'fc fc51, state ready'
+    model: Optional[str] = None  # None: the reads cannot tell (VLT 5000 or 6000)
+
+
+def other_family(session: Session, found: Answer, tail: str = '') -> str:
+    """Return the line that says ``found`` answers at the session's address, not its family."""
+    device = session.device
+    if found.family is None:
+        return f'{session.name}: address {device.address}: {found.words} ({device.family} ' \
+            f'included): check --address and --family{tail}'
+    return f'{session.name}: address {device.address} answers as {found.words}, not as ' \
+        f'family {device.family}: give --family {found.family} (or the right address){tail}'
+
+
+def identify(bus: Dict[str, Any], address: int, runner: TransactionRunner,
+             retries: int = 0) -> Optional[Answer]:
     """
-    Return (family, in words) of what answers at ``address``, or None if nothing does.
+    Return what answers at ``address``, or None if nothing does.
 
     FC-series drives are asked for their type text (par. 15-40) first, then MCD starters
     for their product word (40007); then the address is probed as a VLT 5000/6000 option
-    card (:func:`probe_option_card`). Silence at the first question ends the address. The
-    family is None for a device that answers as none of them.
+    card (:func:`probe_option_card`). Silence at the first question ends the address (a
+    reply lost ``retries`` times over: ``scan`` gives none, a check before a write the
+    bus's). Reads only.
     """
     for family in SCAN_FAMILIES:
         session = None
         try:
-            session = probe_session(bus, family, address, runner)
+            session = probe_session(bus, family, address, runner, retries)
             if session is None:
                 continue
             reading = session.poll()
             unknown = unknown_drive_type(session.profile, reading.state)
             if unknown:
-                return 'vlt', unknown
-            return family, f'{family} {session.profile.model}, state {reading.state}'
+                return Answer('vlt', unknown)
+            return Answer(family, f'{family} {session.profile.model}, state {reading.state}',
+                          session.profile.model)
         except LinkDown as error:
             raise CliError(str(error)) from None
         except NoResponse:
@@ -722,8 +796,8 @@ def identify(bus: Dict[str, Any], address: int, runner: TransactionRunner) \
             if session is not None:
                 session.close()
     card = probe_option_card(bus, address, runner)
-    return ('vlt', card) if card else \
-        (None, 'something answers, but not as any supported family')
+    return Answer('vlt', card) if card else \
+        Answer(None, 'something answers, but not as any supported family')
 
 
 def unknown_drive_type(profile, state: str) -> str:
@@ -813,11 +887,13 @@ SUBCOMMANDS = {
             'register IND first).'),
     'set': ('write a parameter, then read it back',
             'Write one parameter and read it back. The value is checked first against the '
-            "model's table (type, limits, options): nothing is written if it does not fit. "
-            'A text parameter takes the value as text (1234567890 stays text). Process data '
-            'and control registers (FC 51 50000 CTW ...) are no parameters and are refused: '
-            "use the node's commands. A device configured allow_control: false is refused "
-            'unless --force is given.'),
+            "model's table (type, limits, options), and the device at the address is asked "
+            'what it is, with reads only as scan asks: nothing is written if the value does '
+            'not fit or the device does not answer as the family and model given. A text '
+            'parameter takes the value as text (1234567890 stays text). Process data and '
+            'control registers (FC 51 50000 CTW ...) are no parameters and are refused: use '
+            "the node's commands. A device configured allow_control: false is refused unless "
+            '--force is given.'),
     'backup': ('save all parameters to YAML and verify',
                "Read every setting of the device (drives: the settings of the model's "
                "table; MCD: parameters 1 to the model's last), read them all again, and "
@@ -829,9 +905,11 @@ SUBCOMMANDS = {
                 'Check the whole file first and write nothing unless all of it fits: family '
                 'and model (never overridable), device name and address (--force to restore '
                 "another device's backup), every number in the model's table and a "
-                'setting, every value within its type, limits and options. Then write each '
-                "parameter in the file's order and read every one back. A failure or "
-                'Ctrl-C part-way says which parameters were written.'),
+                'setting, every value within its type, limits and options; and ask the device '
+                'at the address what it is (reads only, as scan asks): nothing is written '
+                'unless it answers as the family and model given. Then write each parameter '
+                "in the file's order and read every one back. A failure or Ctrl-C part-way "
+                'says which parameters were written.'),
     'monitor': ('live decoded status (Ctrl-C ends)',
                 'Poll the device once a period and print one line each time, until Ctrl-C '
                 '(exit status 130) or --count polls. Reads only.'),

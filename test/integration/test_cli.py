@@ -23,7 +23,8 @@ from drive_bridge.protocol import rtu
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
-from drive_bridge.tools.cli import main
+from drive_bridge.tools.cli import build_parser, main, Session
+from drive_bridge.tools.cli_target import make_bus
 import pytest
 import yaml
 
@@ -675,6 +676,110 @@ def test_a_family_that_does_not_fit_the_device_at_the_address_says_what_answers(
     assert one_line(capsys).startswith(f'drive-bridge: {told}')
     assert not [frame for unit in LINE for frame in writes_to(line, unit)]
     assert not os.listdir(tmp_path)
+
+
+# -- a write goes only to a device that answers as the family and model given --------------
+MCD500_AT_FC51 = ['--family', 'mcd', '--model', 'mcd500', '--address', 1]
+VLT5000_AT_FC51 = ['--family', 'vlt', '--model', 'vlt5000', '--address', 1]
+MCD500_AT_MCD3000 = ['--family', 'mcd', '--model', 'mcd500', '--address', 21]
+FC51_AT_VLT5000 = ['--family', 'fc', '--model', 'fc51', '--address', 5]
+
+
+def parameters_of(line):
+    return {unit: dict(model(line, unit).parameters) for unit in LINE}
+
+
+@pytest.mark.parametrize('device, argv, told', [
+    (MCD500_AT_FC51, [4, 5], 'mcd_1: address 1 answers as fc fc51, state ready, not as family '
+     'mcd: give --family fc (or the right address); nothing written'),
+    (VLT5000_AT_FC51, [104, 60], 'vlt_1: address 1 answers as fc fc51, state ready, not as '
+     'family vlt: give --family fc (or the right address); nothing written'),
+    (MCD500_AT_MCD3000, [4, 5], 'mcd_21: address 21 answers as mcd mcd3000, state ready, not '
+     'as model mcd500: give --model mcd3000 (or the right address); nothing written'),
+    (FC51_AT_VLT5000, ['3-41', 5], 'fc_5: address 5 answers as vlt (VLT 5000/6000 option '
+     'card: set model vlt5000 or vlt6000), state ready, not as family fc: give --family vlt'),
+])
+def test_set_writes_nothing_to_a_device_that_answers_as_another_family_or_model(
+        line, capsys, device, argv, told):
+    # Before: the family was asked only after the device refused the write, so with --model
+    # the write went out first (an MCD 500's parameter 4 into the FC 51's register 11).
+    before = parameters_of(line)
+    code, _ = run('set', *bus(line), *device, *argv)
+    assert not [frame for unit in LINE for frame in writes_to(line, unit)]
+    assert parameters_of(line) == before
+    assert code == 2
+    assert one_line(capsys).startswith(f'drive-bridge: {told}')
+
+
+@pytest.mark.parametrize('taken_of, device, unit', [
+    (MCD500, MCD500_AT_FC51, 1),
+    (['--family', 'vlt', '--model', 'vlt5000', '--address', 5], VLT5000_AT_FC51, 1),
+    (MCD500, MCD500_AT_MCD3000, 21),
+])
+def test_restore_writes_nothing_to_a_device_that_answers_as_another_family_or_model(
+        line, tmp_path, capsys, taken_of, device, unit):
+    path = backup(line, tmp_path, taken_of)
+    before = parameters_of(line)
+    line.stats.frames.clear()
+    code, _ = run('restore', *bus(line), *device, '--force', path)  # --force: another address
+    assert not [frame for each in LINE for frame in writes_to(line, each)]
+    assert parameters_of(line) == before
+    warning, error = capsys.readouterr().err.splitlines()
+    assert code == 2 and warning.startswith('drive-bridge: WARNING: it is a backup of device')
+    assert error.startswith(f'drive-bridge: {device[1]}_{unit}: address {unit} answers as ')
+    assert error.endswith('; nothing written')
+
+
+def test_a_vlt_text_parameter_is_not_read_at_another_drive_by_writing_its_index(
+        line, capsys):
+    # Reading a VLT text parameter writes the index register (IND) first: a write too.
+    before = parameters_of(line)
+    code, _ = run('get', *bus(line), '--family', 'vlt', '--model', 'vlt6000', '--address', 1,
+                  533)
+    assert not writes_to(line, 1) and parameters_of(line) == before
+    assert code == 2 and 'vlt_1: address 1 answers as fc fc51' in one_line(capsys)
+
+
+def test_set_writes_nothing_to_a_silent_address(line, capsys):
+    code, _ = run('set', *bus(line), '--family', 'fc', '--model', 'fc51', '--address', 9,
+                  '3-41', 5)
+    assert line.stats.frames and not writes_to(line, 9)  # frames to a silent unit are kept
+    error = one_line(capsys)
+    assert code == 1 and error.startswith('drive-bridge: fc_9: no reply from address 9 to '
+                                          'identify it before writing within 0.5 s')
+    assert error.endswith(' Nothing written.\n')
+
+
+def test_a_device_that_answers_as_its_family_and_model_gets_its_writes(line, tmp_path):
+    code, out = run('set', *bus(line), *MCD500, '--model', 'mcd500', 4, 7)
+    assert code == 0 and '4 = 7 % FLC (written, read back)' in out
+    assert model(line, 20).parameters[4] == 7 and len(writes_to(line, 20)) == 1
+    path = backup(line, tmp_path, [*MCD500, '--model', 'mcd500'])
+    model(line, 20).parameters[4] = 9
+    code, out = run('restore', *bus(line), *MCD500, '--model', 'mcd500', path)
+    assert code == 0 and '591 parameters restored to mcd500 mcd_20' in out
+    assert model(line, 20).parameters[4] == 7 and len(writes_to(line, 20)) == 1 + 591
+
+
+def test_a_model_the_device_cannot_be_told_apart_from_is_taken_as_given():
+    # An MCD 201 reports the product type of a 202 (40007): --model mcd201 is not refused.
+    server = make_sim_server({2: 'mcd202'})
+    server.open_pty()
+    server.start()
+    try:
+        code, out = run('status', *bus(server), '--family', 'mcd', '--model', 'mcd201',
+                        '--address', 2)
+        assert code == 0 and 'mcd mcd201' in out
+        config, device, values = make_bus(build_parser().parse_args(
+            ['set', *map(str, bus(server)), '--family', 'mcd', '--model', 'mcd201',
+             '--address', '2', '1', '1']))
+        session = Session(config, device, bus=values)
+        try:
+            session.check_before_writing()  # no CliError
+        finally:
+            session.close()
+    finally:
+        server.stop()
 
 
 def test_backup_refuses_an_existing_file_reading_nothing_unless_force(line, tmp_path, capsys):
