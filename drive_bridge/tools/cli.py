@@ -37,6 +37,7 @@ from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceReading, ParameterAccess, ParameterOptions
 from drive_bridge.devices.drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
 from drive_bridge.devices.parameters import DATA_TYPES, parameter_address, ParameterSpec, TEXT
+from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.errors import (
     CommandRefused, ConfigError, DeviceException, DriveBridgeError, LinkDown, ModelMismatch,
     MonitorOnly, NoResponse, ProtocolError, TransportError)
@@ -694,8 +695,12 @@ def command_scan(args, out) -> int:
     """Try every address in the range; print what answers, with family and model."""
     first, last = parse_range(args.addresses)
     bus = bus_values(args, file_block(args)[0])  # the file's bus, options winning
+    families = scan_families(bus)
+    if not families:
+        raise CliError(f'scan: no family it can identify runs on protocol '
+                       f'{bus.get("protocol", "modbus_rtu")!r}', EXIT_USAGE)
     config = cfg.build_config(dict(bus, devices=['probe']),
-                              {'probe': {'family': SCAN_FAMILIES[0], 'address': first}})
+                              {'probe': {'family': families[0], 'address': first}})
     runner = open_runner(config)  # one port for the whole scan
     found = 0
     try:
@@ -710,6 +715,12 @@ def command_scan(args, out) -> int:
         runner.transport.close()
     print(f'{found} device(s) found at addresses {first}-{last}', file=out)
     return EXIT_OK
+
+
+def scan_families(bus: Dict[str, Any]) -> Tuple[str, ...]:
+    """Return the families ``scan`` asks, in order, that can run on the bus's protocol."""
+    return tuple(family for family in SCAN_FAMILIES
+                 if bus.get('protocol', 'modbus_rtu') in FAMILIES[family].protocols)
 
 
 def parse_range(text: str) -> Tuple[int, int]:
@@ -773,7 +784,7 @@ def identify(bus: Dict[str, Any], address: int, runner: TransactionRunner,
     reply lost ``retries`` times over: ``scan`` gives none, a check before a write the
     bus's). Reads only.
     """
-    for family in SCAN_FAMILIES:
+    for family in scan_families(bus):
         session = None
         try:
             session = probe_session(bus, family, address, runner, retries)
@@ -783,8 +794,12 @@ def identify(bus: Dict[str, Any], address: int, runner: TransactionRunner,
             unknown = unknown_drive_type(session.profile, reading.state)
             if unknown:
                 return Answer('vlt', unknown)
-            return Answer(family, f'{family} {session.profile.model}, state {reading.state}',
-                          session.profile.model)
+            model = session.profile.model
+            if model == 'auto':  # AP ASCII: the starter cannot tell its model
+                protocol = bus.get('protocol', 'modbus_rtu')
+                return Answer(family, f'{family} (its model cannot be read over {protocol}: '
+                                      f'name it with --model), state {reading.state}')
+            return Answer(family, f'{family} {model}, state {reading.state}', model)
         except LinkDown as error:
             raise CliError(str(error)) from None
         except NoResponse:
@@ -795,7 +810,8 @@ def identify(bus: Dict[str, Any], address: int, runner: TransactionRunner,
         finally:
             if session is not None:
                 session.close()
-    card = probe_option_card(bus, address, runner)
+    card = probe_option_card(bus, address, runner) \
+        if bus.get('protocol', 'modbus_rtu') in FAMILIES['vlt'].protocols else ''
     return Answer('vlt', card) if card else \
         Answer(None, 'something answers, but not as any supported family')
 

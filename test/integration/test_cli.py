@@ -125,6 +125,23 @@ def test_scan_on_the_fc_protocol_tells_a_drive_that_does_not_tell_its_type():
         '2 device(s) found at addresses 1-3']
 
 
+def test_scan_on_ap_ascii_asks_only_the_families_that_line_carries():
+    server = make_ap_ascii_server({20: 'mcd500', 21: 'mcd3000'})
+    server.open_pty()
+    server.start()
+    try:
+        code, out = run('scan', '--protocol', 'ap_ascii', '--port', server.pty_path,
+                        '--addresses', '19-21', '--timeout', 0.3, '--quiet')
+    finally:
+        server.stop()
+    assert code == 0 and out.splitlines() == [
+        'address 20: mcd (its model cannot be read over ap_ascii: name it with --model), '
+        'state ready',
+        'address 21: mcd (its model cannot be read over ap_ascii: name it with --model), '
+        'state ready',
+        '2 device(s) found at addresses 19-21']
+
+
 def test_the_simulated_vlt6000_refuses_par_520_as_a_real_one_did(line):
     code, _ = run('get', *bus(line), '--family', 'vlt', '--model', 'vlt6000', '--address', 6,
                   520, '--type', 'uint32', '--conversion', -2)
