@@ -78,14 +78,19 @@ PROFILE_SETTINGS: Tuple[Setting, ...] = (
             '(status, current, speed) are read every poll; 0 = every poll',
             low=0.0, high=3600.0),
 )
-# Families that take a speed reference (drives) take these too.
-REFERENCE_SETTINGS: Tuple[Setting, ...] = (
-    Setting('speed_reference', float, 0.0, 'drives: percent, FC scaling',
+# Families that take a speed reference (drives) take these too: the reference and its
+# deadman, and the ros2_control joint settings (~/joint_states, ~/joint_commands: see
+# drive_bridge.ros.joints).
+SPEED_REFERENCE_SETTINGS: Tuple[Setting, ...] = (
+    Setting('speed_reference', float, 0.0,
+            'drives: the bus speed reference in percent (FC scaling, 0x4000 = 100 %; negative '
+            '= reverse); it goes out with the next process-data write',
             low=-200.0, high=200.0, high_open=True, runtime=True),
     Setting('reference_timeout', float, 0.0,
             'drives: seconds without a speed_reference message before a ramp stop; 0 = off',
             low=0.0, high=3600.0, runtime=True),
-    # ros2_control (~/joint_states, ~/joint_commands): see drive_bridge.ros.joints.
+)
+JOINT_SETTINGS: Tuple[Setting, ...] = (
     Setting('velocity_scale', float, 0.0,
             'drives: rad/s of the joint at 100 % reference (negative: the joint turns the '
             'other way); 0 = not a joint', low=-10000.0, high=10000.0),
@@ -99,6 +104,15 @@ REFERENCE_SETTINGS: Tuple[Setting, ...] = (
     Setting('auto_stop_delay', float, 1.0,
             'drives: seconds a zero joint command is held before command_mode auto_start '
             'ramp-stops the drive', low=0.0, high=3600.0, runtime=True),
+)
+REFERENCE_SETTINGS: Tuple[Setting, ...] = SPEED_REFERENCE_SETTINGS + JOINT_SETTINGS
+# The node's own parameters (not the bus's): declared by drive_bridge.ros.node.
+NODE_SETTINGS: Tuple[Setting, ...] = (
+    Setting('autostart', bool, True,
+            'walk the lifecycle to active at start (false: wait for configure and activate)'),
+    Setting('allow_runtime_control_enable', bool, True,
+            'false: allow_control cannot be switched on with ros2 param set (a site can '
+            'forbid other processes to enable control)'),
 )
 JOINT_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_./-]*')
 MAX_JOINT_NAME = 128

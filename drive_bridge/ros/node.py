@@ -48,13 +48,6 @@ NODE_NAME = 'drive_bridge'
 SERVICE_COMMANDS = (Command.START, Command.STOP, Command.QUICK_STOP, Command.COAST_STOP,
                     Command.RESET)
 STOP_ALL_TIMEOUT_S = 3.0
-NODE_SETTINGS: Tuple[Setting, ...] = (
-    Setting('autostart', bool, True,
-            'walk the lifecycle to active at start (false: wait for configure and activate)'),
-    Setting('allow_runtime_control_enable', bool, True,
-            'false: allow_control cannot be switched on with ros2 param set (a site can '
-            'forbid other processes to enable control)'),
-)
 EXIT_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
@@ -88,7 +81,7 @@ class DriveBridgeNode(LifecycleNode):
         super().__init__(NODE_NAME, **kwargs)
         self._guard_change_state()
         node_values = {setting.name: self._declare(setting, setting.name)
-                       for setting in NODE_SETTINGS}
+                       for setting in cfg.NODE_SETTINGS}
         self.autostart = bool(node_values['autostart'])
         self.allow_runtime_control_enable = bool(node_values['allow_runtime_control_enable'])
         self.config: Optional[cfg.BridgeConfig] = None
@@ -309,7 +302,7 @@ class DriveBridgeNode(LifecycleNode):
             if '.' in key:
                 raise ConfigError(f'parameter {key!r}: {device!r} is not a listed device '
                                   f'(devices: {", ".join(names)})')
-            known = ', '.join(s.name for s in cfg.BUS_SETTINGS + NODE_SETTINGS)
+            known = ', '.join(s.name for s in cfg.BUS_SETTINGS + cfg.NODE_SETTINGS)
             raise ConfigError(f'unknown parameter {key!r}: known bus parameters are {known}')
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:

@@ -165,16 +165,21 @@ def _draw_values(axis, field: str, samples: Samples, end_s: float) -> None:
         axis.plot(times, values, color=colour, label=label)
 
 
-def main(argv: Optional[List[str]] = None) -> int:
-    """Plot a recording; exit 2 with one line on a bad bag or device name."""
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser."""
     parser = argparse.ArgumentParser(prog='drive_bridge_plot', description=__doc__.split(
         '\n\n')[1].split('. ')[0].replace('``', '') + '.')
     parser.add_argument('recording', help='bag directory (or a file in it)')
     parser.add_argument('output', help='PNG file to write')
     parser.add_argument('--device', action='append',
                         help='only this device (repeatable; e.g. crusher or line1/crusher)')
-    parser.add_argument('--title', default='')
-    args = parser.parse_args(argv)
+    parser.add_argument('--title', default='', help='title above the plot')
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Plot a recording; exit 2 with one line on a bad bag or device name."""
+    args = build_parser().parse_args(argv)
     try:
         plot(read_recording(args.recording), args.output, args.device, args.title)
     except (NotARecording, OSError, ValueError) as error:
