@@ -32,8 +32,8 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
     Setting('tcp_port', int, 502, 'gateway TCP port', low=1, high=65535),
     Setting('baudrate', int, 9600, 'serial baud rate', choices=BAUDRATES),
     Setting('parity', str, 'E', 'serial parity (quote "N" in YAML)', choices=PARITIES),
-    Setting('stopbits', int, 0, '0 = Modbus standard: 2 with no parity, 1 with parity',
-            choices=(0, 1, 2)),
+    Setting('stopbits', int, 0, "0 = the protocol's standard: Modbus RTU 2 with no parity, 1 "
+            'with parity; FC protocol and AP ASCII 1', choices=(0, 1, 2)),
     Setting('timeout', float, 0.5, 'seconds per transaction', low=0.02, high=10.0),
     Setting('retries', int, 2, 'retries of a read (commands are never repeated)',
             low=0, high=10),
@@ -45,7 +45,8 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
             'longest pause in seconds between probes of an offline device or link',
             low=0.5, high=600.0),
     Setting('frame_gap', float, 0.0,
-            'pause in seconds between transactions; 0 = 3.5 characters on serial lines',
+            "pause in seconds between transactions; 0 = the protocol's own: 3.5 characters "
+            'on Modbus RTU and AP ASCII, 2 on the FC protocol, none on TCP',
             low=0.0, high=1.0),
     Setting('local_echo', bool, False, 'the RS-485 adapter echoes what it sends'),
     Setting('diagnostics_period', float, 1.0, 'seconds between /diagnostics messages',

@@ -91,7 +91,10 @@ class SettingsTable(SphinxDirective):
                 for setting in group.settings]
         shown = self.env.__dict__.setdefault('drive_bridge_groups', {})
         shown.setdefault(group.key, set()).add(self.env.docname)
-        return [make_table(SETTINGS_HEADERS, SETTINGS_WIDTHS, rows)]
+        table = make_table(SETTINGS_HEADERS, SETTINGS_WIDTHS, rows)
+        table.insert(0, nodes.title(text=group.title))
+        table['ids'].append(nodes.make_id(f'parameters-{group.key}'))
+        return [table]
 
     def _notes(self, group: reference.Group) -> Dict[str, Any]:
         try:
