@@ -75,7 +75,7 @@ class _PendingCall:
 
 
 class DriveBridgeNode(LifecycleNode):
-    """One bus owner; see the module docstring and the README."""
+    """One bus owner; see the module docstring and the manual (docs/ros_api.md)."""
 
     def __init__(self, **kwargs: Any):
         super().__init__(NODE_NAME, **kwargs)
@@ -654,7 +654,7 @@ USAGE = """usage: drive_bridge_node [--ros-args --params-file FILE [-r __ns:=/li
 
 The drive_bridge node: one RS-485 bus (or Modbus gateway) with its soft starters and drives,
 as ROS 2 topics, services and parameters. Settings come from a ROS 2 parameters file; see the
-README and config/*.yaml. Exit status: 0 after a signal, 2 on a configuration error."""
+docs/configuration.md and config/*.yaml. Exit status: 0 after a signal, 2 on a configuration error."""
 
 
 if __name__ == '__main__':
