@@ -653,8 +653,9 @@ def main(args: Optional[List[str]] = None) -> int:
 USAGE = """usage: drive_bridge_node [--ros-args --params-file FILE [-r __ns:=/line1] ...]
 
 The drive_bridge node: one RS-485 bus (or Modbus gateway) with its soft starters and drives,
-as ROS 2 topics, services and parameters. Settings come from a ROS 2 parameters file; see the
-docs/configuration.md and config/*.yaml. Exit status: 0 after a signal, 2 on a configuration error."""
+as ROS 2 topics, services and parameters. Settings come from a ROS 2 parameters file; see
+docs/configuration.md and config/*.yaml. Exit status: 0 after a signal, 2 on a configuration
+error."""
 
 
 if __name__ == '__main__':
