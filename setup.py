@@ -22,7 +22,10 @@ setup(
         (f'share/{PACKAGE}/config/ros2_control', glob('config/ros2_control/*')),
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),
     ],
-    install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5', 'tqdm>=4.66'],
+    # PyYAML: parameter and backup files, bag metadata (package.xml: python3-yaml)
+    install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5', 'tqdm>=4.66',
+                      'PyYAML>=5.4'],
+    # drive_bridge_record and drive_bridge_plot; drive_bridge/extras.py names them when missing
     extras_require={'recording': ['rosbags>=0.10.11', 'matplotlib>=3.6']},
     tests_require=['pytest'],  # colcon test runs pytest when this names it
     zip_safe=True,
@@ -37,6 +40,7 @@ setup(
             'drive-bridge = drive_bridge.tools.cli:main',
             'drive_bridge_plot = drive_bridge.tools.plot_recording:main',
             'drive_bridge_record = drive_bridge.ros.record:main',
+            'drive_bridge_ctl = drive_bridge.ros.ctl:main',
         ],
     },
 )

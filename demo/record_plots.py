@@ -156,10 +156,10 @@ def main(argv: Optional[List[str]] = None) -> None:
     os.makedirs(args.output, exist_ok=True)
     record(args)
     from drive_bridge.tools.plot_recording import plot, read_recording
-    series = read_recording(args.bag)
+    recording = read_recording(args.bag)
     for filename, device, title in PLOTS:
         path = os.path.join(args.plot_dir, filename)
-        plot(series, path, [device], title)
+        plot(recording, path, [device], title)
         print(f'wrote {path}', flush=True)
     print(f'bag: {args.bag}', flush=True)
 

@@ -32,14 +32,25 @@ try:  # the command references; drive_bridge_docs stands in with --help without 
 except ImportError:
     pass
 
-# drive_bridge_record's parser sits beside its rclpy code: import it with what is missing
-# mocked (a docs build needs no ROS), as rosdoc2 mocks the missing exec_depends for autodoc.
-try:
-    import drive_bridge.ros.record  # noqa: F401
-except ImportError:
-    from sphinx.ext.autodoc.mock import mock
-    with mock(['rclpy', 'rosbags']):
-        import drive_bridge.ros.record  # noqa: F401
+# drive_bridge_record's parser sits beside its rclpy code: import it with the ROS modules that
+# are not installed mocked (a docs build needs no ROS), as rosdoc2 mocks the missing
+# exec_depends for autodoc.
+ROS_MODULES = ('rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'sensor_msgs',
+               'diagnostic_msgs', 'lifecycle_msgs', 'ament_index_python', 'rosbags')
+
+
+def _missing(name: str) -> bool:
+    try:
+        importlib.import_module(name)
+    except ImportError:
+        return True
+    return False
+
+
+from sphinx.ext.autodoc.mock import mock  # noqa: E402 - Sphinx is there when this runs
+
+with mock([name for name in ROS_MODULES if _missing(name)]):
+    importlib.import_module('drive_bridge.ros.record')
 
 source_suffix = {'.md': 'markdown'}
 root_doc = 'index'

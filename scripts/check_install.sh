@@ -7,13 +7,14 @@ set -euo pipefail
 install=$(cd "${1:?install dir}" && pwd)
 lib="$install/drive_bridge/lib/drive_bridge"
 for command in drive_bridge_node drive_bridge_sim drive-bridge drive_bridge_plot \
-    drive_bridge_record; do
+    drive_bridge_record drive_bridge_ctl; do
   [ -x "$lib/$command" ] || { echo "not installed: $lib/$command" >&2; exit 1; }
 done
 set +u  # colcon's setup.sh reads unset variables
 . "$install/setup.sh"
 set -u
-for command in drive_bridge_sim drive-bridge drive_bridge_plot drive_bridge_record; do
+for command in drive_bridge_sim drive-bridge drive_bridge_plot drive_bridge_record \
+    drive_bridge_ctl; do
   "$lib/$command" --help > /dev/null || { echo "$lib/$command --help failed" >&2; exit 1; }
 done
 python=$(head -1 "$lib/drive_bridge_record" | sed 's/^#!//')

@@ -28,11 +28,10 @@ from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusEvent, BusMaster
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError
 from drive_bridge.protocol.commands import Command
-from drive_bridge.ros import joints
+from drive_bridge.ros import joints, logs
 from drive_bridge.ros.diagnostics import diagnostic_status, status_name
 from drive_bridge.ros.publishers import DevicePublishers
 from drive_bridge.settings import check_value, Setting
-from drive_bridge.transport.protocols import PROTOCOLS
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 import rclpy
@@ -48,6 +47,7 @@ NODE_NAME = 'drive_bridge'
 SERVICE_COMMANDS = (Command.START, Command.STOP, Command.QUICK_STOP, Command.COAST_STOP,
                     Command.RESET)
 STOP_ALL_TIMEOUT_S = 3.0
+NODE_SETTINGS = cfg.NODE_SETTINGS
 EXIT_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
@@ -79,6 +79,7 @@ class DriveBridgeNode(LifecycleNode):
 
     def __init__(self, **kwargs: Any):
         super().__init__(NODE_NAME, **kwargs)
+        self._log_handler = logs.attach(self.get_logger())  # the transports' notes
         self._guard_change_state()
         node_values = {setting.name: self._declare(setting, setting.name)
                        for setting in cfg.NODE_SETTINGS}
@@ -103,6 +104,11 @@ class DriveBridgeNode(LifecycleNode):
                                                     callback_group=self._calls)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def destroy_node(self) -> None:
+        """Stop taking the package's log records, then destroy the node."""
+        logs.detach(self._log_handler)
+        super().destroy_node()
 
     # -- lifecycle ----------------------------------------------------------------------
     def _guard_change_state(self) -> None:
@@ -240,20 +246,21 @@ class DriveBridgeNode(LifecycleNode):
     # -- configuration ------------------------------------------------------------------
     def _load_config(self) -> cfg.BridgeConfig:
         protocol = self._declare(cfg.BUS_SETTINGS[0], 'protocol')
-        own = PROTOCOLS[protocol].settings if protocol in PROTOCOLS else ()
-        protocol_names = {setting.name for spec in PROTOCOLS.values()
-                          for setting in spec.settings}
+        settings = {setting.name: setting for setting in cfg.BUS_SETTINGS}
         bus_values = {'protocol': protocol}
-        for setting in cfg.BUS_SETTINGS[1:]:
-            if setting.name not in protocol_names or setting in own:
-                bus_values[setting.name] = self._declare(setting, setting.name)
+        for name in cfg.bus_parameter_names(protocol):
+            if name in settings and name != 'protocol':
+                bus_values[name] = self._declare(settings[name], name)
         names = bus_values.get('devices') or []
         if not isinstance(names, list):
             raise ConfigError(f"parameter 'devices' = {names!r} has the wrong type: give a "
                               'list of device names')
         cfg.check_device_names(names)
         device_values = {name: self._declare_device(name) for name in names}
-        self._check_unknown_overrides(names, protocol)
+        overrides = getattr(self, '_parameter_overrides', {}) or {}
+        cfg.check_unknown_parameters(
+            overrides, self.has_parameter, names, protocol,
+            {name: values['family'] for name, values in device_values.items()})
         return cfg.build_config(bus_values, device_values)
 
     def _declare_device(self, name: str) -> Dict[str, Any]:
@@ -279,31 +286,6 @@ class DriveBridgeNode(LifecycleNode):
                 raise ConfigError(f'parameter {label!r} is refused: allowed '
                                   f'{setting.allowed()}') from None
         return list(value) if isinstance(value, (list, tuple)) else value
-
-    def _check_unknown_overrides(self, names: List[str], protocol: str) -> None:
-        overrides = getattr(self, '_parameter_overrides', {}) or {}
-        for key in overrides:
-            if self.has_parameter(key) or key.startswith('qos_overrides.'):
-                continue
-            device, _, setting = key.partition('.')
-            if device in names and setting:
-                owners = cfg.families_taking(setting)
-                if owners:
-                    raise ConfigError(f'parameter {key!r} applies to families '
-                                      f'{", ".join(owners)} only')
-                family = self.get_parameter(f'{device}.family').value
-                known = [s.name for s in cfg.device_settings(cfg.FAMILIES[family])]
-                raise ConfigError(f'unknown parameter {key!r}: a {family} device takes '
-                                  f'{", ".join(known)}')
-            for name, spec in PROTOCOLS.items():
-                if any(s.name == key for s in spec.settings):
-                    raise ConfigError(f'parameter {key!r} applies to protocol {name} only, '
-                                      f'not {protocol}')
-            if '.' in key:
-                raise ConfigError(f'parameter {key!r}: {device!r} is not a listed device '
-                                  f'(devices: {", ".join(names)})')
-            known = ', '.join(s.name for s in cfg.BUS_SETTINGS + cfg.NODE_SETTINGS)
-            raise ConfigError(f'unknown parameter {key!r}: known bus parameters are {known}')
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         """Check every change first, then apply them all at once on the bus, or none."""

@@ -8,7 +8,11 @@ topics that appear later are added within a second). Relative topic names are ta
 ``--namespace``. Recording starts once the subscriptions are connected to the publishers (at
 most ``--wait`` seconds), and ends after ``--duration`` seconds or at Ctrl-C / SIGTERM; either
 way the bag is closed cleanly and the exit status is 0, as with ``ros2 bag record``.
-Exit status: 0 recorded, 1 the bag could not be written, 2 bad input (one line on stderr).
+For each recorded ``<device>/speed_reference`` the bag's metadata keeps the bridge's
+``<device>.speed_reference`` parameter as recording began (the reference configured then;
+the topic carries only later changes), for ``drive_bridge_plot``.
+Exit status: 0 recorded, 1 the bag could not be written, 2 bad input or ``rosbags`` missing
+(one line on stderr).
 """
 
 import argparse
@@ -17,21 +21,30 @@ import os
 import signal
 import sys
 import time
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple, TYPE_CHECKING
 
+from drive_bridge.bag_metadata import encode_references, REFERENCE_AT_START
 from drive_bridge.errors import RecordingError
-from drive_bridge.ros.recorder import BagRecorder, count_summary, is_recordable
+from drive_bridge.extras import MissingDependency, require
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import GetParameters
 import rclpy
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 from rclpy.validate_full_topic_name import validate_full_topic_name
+
+if TYPE_CHECKING:  # rosbags is optional: main() checks it before the recorder is imported
+    from drive_bridge.ros.recorder import BagRecorder
 
 PROG = 'drive_bridge_record'
 BRIDGE_NODE = 'drive_bridge'
 SKIPPED = ('/rosout', '/parameter_events')
 RESCAN_PERIOD_S = 1.0
+REFERENCE_TOPIC = 'speed_reference'
+PARAMETER_RETRY_S = 1.0
 
 
 class BadInput(Exception):
@@ -154,6 +167,7 @@ class _Stop:
 
 def recordable(topics: Dict[str, str], skip_unknown: bool) -> Dict[str, str]:
     """Return the topics whose type rosbags knows; skip (--all) or refuse the others."""
+    from drive_bridge.ros.recorder import is_recordable  # needs rosbags: main() checked it
     unknown = {topic: name for topic, name in topics.items() if not is_recordable(name)}
     if unknown and not skip_unknown:
         topic, name = sorted(unknown.items())[0]
@@ -163,8 +177,70 @@ def recordable(topics: Dict[str, str], skip_unknown: bool) -> Dict[str, str]:
     return {topic: name for topic, name in topics.items() if topic not in unknown}
 
 
-def record(node: Node, args: argparse.Namespace, stop: _Stop) -> BagRecorder:
+def configured_references(node: Node, topics: List[str], deadline_s: float,
+                          stop: _Stop) -> Dict[str, float]:
+    """
+    Return reference topic -> its bridge's ``<device>.speed_reference`` parameter now [%].
+
+    The bridge of ``<namespace>/<device>/speed_reference`` is ``<namespace>/drive_bridge``
+    (device names hold no slash); it is asked through its parameter service, spinning
+    ``node`` (so the recording goes on), until ``deadline_s`` (monotonic) at the latest.
+    Parameters left unanswered are named in one line on stderr and left out, as are those
+    the bridge does not have.
+    """
+    wanted: Dict[str, Dict[str, str]] = {}  # bridge node -> parameter -> topic
+    for topic in topics:
+        namespace, device, name = (['', ''] + topic.rsplit('/', 2))[-3:]
+        if name == REFERENCE_TOPIC and device:
+            wanted.setdefault(f'{namespace}/{BRIDGE_NODE}', {})[f'{device}.{name}'] = topic
+    found: Dict[str, float] = {}
+    for bridge, parameters in sorted(wanted.items()):
+        values, unanswered = _double_parameters(node, bridge, list(parameters), deadline_s,
+                                                stop)
+        found.update((parameters[name], value) for name, value in values.items())
+        if unanswered:
+            print(f'{PROG}: no answer from {bridge} about {", ".join(unanswered)}: the bag '
+                  'has no reference at the start', file=sys.stderr, flush=True)
+    return found
+
+
+def _double_parameters(node: Node, bridge: str, names: List[str], deadline_s: float,
+                       stop: _Stop) -> Tuple[Dict[str, float], List[str]]:
+    """
+    Return the double parameters ``names`` of node ``bridge``, and the names unanswered.
+
+    One request per name (a name the node lacks empties a whole answer), repeated each
+    ``PARAMETER_RETRY_S`` until answered (reading is harmless): the answer to a client that
+    the server has not discovered yet is lost.
+    """
+    client = node.create_client(GetParameters, f'{bridge}/get_parameters')
+    pending: Dict[str, Optional[Future]] = dict.fromkeys(names)
+    found: Dict[str, float] = {}
+    sent_s = -math.inf
+    try:
+        while pending and time.monotonic() < deadline_s and not stop.requested:
+            for name, future in list(pending.items()):
+                if future is not None and future.done():
+                    values = future.result().values
+                    if values and values[0].type == ParameterType.PARAMETER_DOUBLE:
+                        found[name] = values[0].double_value
+                    del pending[name]
+            if pending and client.service_is_ready() and \
+                    time.monotonic() - sent_s >= PARAMETER_RETRY_S:
+                for name, future in pending.items():
+                    if future is not None:
+                        client.remove_pending_request(future)
+                    pending[name] = client.call_async(GetParameters.Request(names=[name]))
+                sent_s = time.monotonic()
+            rclpy.spin_once(node, timeout_sec=0.05)
+        return found, list(pending)
+    finally:
+        node.destroy_client(client)
+
+
+def record(node: Node, args: argparse.Namespace, stop: _Stop) -> 'BagRecorder':
     """Record until the duration ends or a stop is requested; return the closed recorder."""
+    from drive_bridge.ros.recorder import BagRecorder  # needs rosbags: main() checked it
     topics = recordable(discover(node, args), skip_unknown=args.all)
     recorder = BagRecorder(node, args.output)
     try:
@@ -173,6 +249,10 @@ def record(node: Node, args: argparse.Namespace, stop: _Stop) -> BagRecorder:
         deadline = time.monotonic() + args.wait
         while not recorder.matched() and time.monotonic() < deadline and not stop.requested:
             rclpy.spin_once(node, timeout_sec=0.05)
+        references = configured_references(node, sorted(topics),
+                                           time.monotonic() + args.wait, stop)
+        if references:
+            recorder.set_custom_data(REFERENCE_AT_START, encode_references(references))
         recorder.restart_clock()  # the duration counts from here
         print(f'{PROG}: recording {len(topics)} topics to {args.output}', flush=True)
         rescan = time.monotonic() + RESCAN_PERIOD_S
@@ -195,9 +275,14 @@ def main(argv: Optional[List[str]] = None) -> int:
     argv = sys.argv if argv is None else [PROG] + list(argv)
     try:
         args = parse_args(remove_ros_args(argv)[1:])
+        require(PROG, 'rosbags')
     except BadInput as error:
         print(f'{PROG}: {error}', file=sys.stderr, flush=True)
         return 2
+    except MissingDependency as error:
+        print(error, file=sys.stderr, flush=True)
+        return 2
+    from drive_bridge.ros.recorder import count_summary  # needs rosbags: checked above
     stop = _Stop()
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('drive_bridge_record', start_parameter_services=False)

@@ -101,6 +101,10 @@ class BagRecorder:
         """Return the seconds recorded so far (until :meth:`close`)."""
         return (self._stopped_s or time.monotonic()) - self._started_s
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Keep ``key: value`` in the bag's metadata.yaml (``custom_data``, as rosbag2 does)."""
+        self._writer.set_custom_data(key, value)
+
     def add_topic(self, topic: str, type_name: str) -> None:
         """Subscribe to ``topic`` (a full name) of ``type_name`` (``pkg/msg/Name``)."""
         if topic in self._types:

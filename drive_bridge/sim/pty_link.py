@@ -10,7 +10,11 @@ class PtyLink:
     Open a raw pty pair; the simulator serves on ``master``, clients open ``path``.
 
     The slave side stays open in the simulator too, so the master never sees EIO while no
-    client has it open. A pty moves bytes at once and takes parity N only.
+    client has it open. A pty moves bytes at once and has no wire, so it has no parity:
+    Linux clears the parity a client asks for (and refuses a later open that asks again),
+    which is why the bridge's transports open a pty without parity, whatever the link's
+    framing (:func:`drive_bridge.transport.link.port_framing`). A wire's framing and timing
+    are the wire pacer's (:mod:`drive_bridge.sim.wire_pacer`).
     """
 
     def __init__(self, link_path: str = ''):

@@ -27,6 +27,8 @@ parameter table before a restore writes anything.
 
 from dataclasses import dataclass, field
 import datetime
+import os
+import tempfile
 from typing import Any, Dict, List, Mapping, Optional
 
 from drive_bridge import config as cfg
@@ -85,13 +87,37 @@ def document(device: str, family: str, model: str, address: int,
             'parameters': [{key: row[key] for key in ENTRY_KEYS} for row in rows]}
 
 
-def write(path: str, content: Dict[str, Any]) -> None:
-    """Write a backup document as YAML (keys in the order above)."""
+def write(path: str, content: Dict[str, Any], restore_command: str = '') -> None:
+    """
+    Write a backup document as YAML (keys in the order above), under a header comment.
+
+    The header names the device and gives the whole command that restores the file
+    (``restore_command``). The file is written beside ``path`` and then renamed onto it, so
+    a failure part-way leaves no half file (and an older file under that name as it was).
+    """
     import yaml
-    with open(path, 'w') as stream:
-        stream.write(f'# drive-bridge parameter backup of {content["device"]}: restore it with '
-                     '`drive-bridge restore FILE`\n')
-        yaml.safe_dump(content, stream, sort_keys=False, allow_unicode=True)
+    command = restore_command or 'drive-bridge restore ... FILE'
+    header = (f'# drive-bridge parameter backup of {content["device"]} ({content["family"]} '
+              f'{content["model"]} at address {content["address"]}). Restore it with:\n'
+              f'#   {command}\n')
+    folder, name = os.path.split(os.path.abspath(path))
+    handle, temporary = tempfile.mkstemp(prefix=f'.{name}.', dir=folder)
+    try:
+        with os.fdopen(handle, 'w') as stream:
+            stream.write(header)
+            yaml.safe_dump(content, stream, sort_keys=False, allow_unicode=True)
+        os.chmod(temporary, 0o666 & ~_umask())
+        os.replace(temporary, path)
+    except BaseException:
+        os.unlink(temporary)
+        raise
+
+
+def _umask() -> int:
+    """Return the process's umask (the mode a plain open would give a new file)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 # -- reading --------------------------------------------------------------------------------

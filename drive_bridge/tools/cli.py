@@ -19,6 +19,9 @@ writes anything. Progress goes to stderr, and only while stderr is a terminal. E
 
 import argparse
 from dataclasses import replace
+import logging
+import math
+import os
 import sys
 import textwrap
 import time
@@ -38,23 +41,18 @@ from drive_bridge.protocol.fc_control import StatusWord
 from drive_bridge.protocol.requests import ReadCoils, ReadRegisters
 from drive_bridge.protocol.words import coils_to_words
 from drive_bridge.tools import backup_file, parameter_info as info
+from drive_bridge.tools.cli_target import (
+    bus_values, CliError, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, file_block,
+    make_bus, restore_command)
 from drive_bridge.transport.protocols import PROTOCOLS
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 SCAN_FAMILIES = ('fc', 'mcd')  # asked in this order; then the VLT option card (see scan)
 # Exception codes only the VLT option card answers (its drive's FC-protocol error codes and
 # its own 64-67, 255); a Modbus device answers 01-0B.
 OPTION_CARD_CODES = frozenset({0, 17, 64, 65, 66, 67, 130, 131, 255})
 VLT_COMMON_PARAMETER = 538  # the alarm word: both VLT 5000 and VLT 6000 have it
 MAX_REASONS_SHOWN = 20
-
-
-class CliError(Exception):
-    """A failure to report in one line; ``code`` is the exit status."""
-
-    def __init__(self, text: str, code: int = EXIT_FAILED):
-        super().__init__(text)
-        self.code = code
+PARAMETER_TYPES = sorted(DATA_TYPES) + [TEXT]
 
 
 class Interrupted(CliError):
@@ -70,39 +68,6 @@ def warn(text: str) -> None:
 
 
 # -- the bus and the device ----------------------------------------------------------------
-def bus_values_from(args: argparse.Namespace) -> Dict[str, Any]:
-    """Return the bus settings given as options (only those given)."""
-    names = ('protocol', 'port', 'host', 'tcp_port', 'baudrate', 'parity', 'stopbits',
-             'timeout')
-    return {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
-
-
-def make_bus(args: argparse.Namespace):
-    """Return (BridgeConfig, DeviceConfig) for the device the arguments name."""
-    if args.config:
-        bus, devices = cfg.split_parameters(cfg.select_block(args.config, args.node))
-        bus.update(bus_values_from(args))
-        name = args.device or (bus.get('devices') or [None])[0]
-        if name not in devices:
-            raise ConfigError(f'device {name!r} is not in {args.config}: it has '
-                              f'{", ".join(devices) or "no device blocks"}')
-        values = dict(devices[name])
-        for option in ('family', 'model', 'address'):
-            if getattr(args, option, None) is not None:
-                values[option] = getattr(args, option)
-    else:
-        if args.family is None or args.address is None:
-            raise ConfigError('name the device: --config FILE [--device NAME], or --family '
-                              'with --address')
-        bus = bus_values_from(args)
-        name = f'{args.family}_{args.address}'
-        values = {'family': args.family, 'address': args.address, 'model': args.model}
-        values = {key: value for key, value in values.items() if value is not None}
-    bus['devices'] = [name]
-    config = cfg.build_config(bus, {name: values})
-    return config, config.devices[0]
-
-
 def allow_writes(args: argparse.Namespace, config, device):
     """
     Return (config, device) for a command that writes: refuse a monitor-only device.
@@ -130,13 +95,17 @@ class Session:
     explained as the node explains it (exception 04: register 7 read for the detail).
     """
 
-    def __init__(self, config, device, runner: Optional[TransactionRunner] = None):
+    def __init__(self, config, device, runner: Optional[TransactionRunner] = None,
+                 bus: Optional[Dict[str, Any]] = None):
         self.config = config
         self.device = device
         self.record = BusDevice(device.make_spec(), time.monotonic())
         self.profile = self.record.profile
         self._owns_port = runner is None  # else a port another session opened (scan)
         self.runner = runner or open_runner(config)
+        # The bus settings to ask what answers at the address when the device does not
+        # answer as its family does (None: a probe of scan, which asks that itself).
+        self.bus = bus
         self._polled = False
         self._table: Optional[Dict[int, ParameterSpec]] = None
 
@@ -157,9 +126,14 @@ class Session:
             try:
                 results.append(self._transact(request))
             except DeviceException as error:
+                self.check_family()
                 what = f' {doing}' if doing else ' it'
                 raise CliError(f'{self.name} refused{what}: '
                                f'{self.runner.explain(self.record, error)}') from None
+            except NoResponse as error:
+                if not doing:
+                    raise
+                raise self.silent(error, doing) from None
             except TransportError as error:
                 if not doing or isinstance(error, LinkDown):
                     raise
@@ -183,10 +157,40 @@ class Session:
         try:
             reading = run_poll(self.runner, self.record, self.config.timing.retries)
         except DeviceException as error:
+            self.check_family()
             raise CliError(f'{self.name} refused the poll: '
                            f'{self.runner.explain(self.record, error)}') from None
+        except (ModelMismatch, ProtocolError):
+            self.check_family()
+            raise
         self._polled = True
         return reading
+
+    def silent(self, error: NoResponse, doing: str = '') -> CliError:
+        """Return the CliError of a device that did not answer, naming its address."""
+        link = self.config.link
+        what = f' to {doing}' if doing else ''
+        return CliError(f'{self.name}: no reply from address {self.device.address}{what} '
+                        f'within {link.timeout_s:g} s ({link.protocol}, {link.describe()}): '
+                        'is a device at that address, on this line, with this protocol, baud '
+                        'rate and parity?')
+
+    def check_family(self) -> None:
+        """
+        Raise a CliError if what answers at the address is not of the device's family.
+
+        Asked (reads only, as ``scan`` asks) when the device refuses or garbles what its
+        family is asked: ``--family mcd`` at an FC 51's address says so, instead of an MCD
+        200's register limits.
+        """
+        if self.bus is None:
+            return
+        found = identify(self.bus, self.device.address, self.runner)
+        if found is None or found[0] in (None, self.device.family):
+            return
+        raise CliError(f'{self.name}: address {self.device.address} answers as {found[1]}, '
+                       f'not as family {self.device.family}: give --family {found[0]} (or the '
+                       'right address)', EXIT_USAGE)
 
     def resolve_model(self) -> str:
         """Return the model; with model auto, poll once so that the device tells it."""
@@ -242,6 +246,25 @@ class Session:
         self.require_parameters()
         return info.spec_for(self.profile, number, options, self.table())
 
+    def typed_spec(self, typed: str, number: int,
+                   options: ParameterOptions) -> Optional[ParameterSpec]:
+        """
+        Return :meth:`spec`; for a drive parameter it does not know, a CliError instead.
+
+        The error says how ``typed`` was read (``3-99``: PNU 399) and which options describe
+        a parameter outside the table.
+        """
+        spec = self.spec(number, options)
+        if spec is not None or not isinstance(self.profile, FcProfileDrive):
+            return spec
+        shown_as = self.label(number)
+        read_as = f'(PNU {number})' if shown_as == typed else \
+            f'is read as {shown_as} (PNU {number}), which'
+        raise CliError(f'parameter {typed} {read_as} is not in the {self.profile.model} table: '
+                       f'give its data type with --type ({", ".join(PARAMETER_TYPES)}) and its '
+                       'conversion index with --conversion (e.g. -2 for 0.01), as the manual '
+                       'lists them', EXIT_USAGE)
+
     def parameter(self, number: int, value=None, options: ParameterOptions = ParameterOptions()):
         """Read (value None) or write one parameter; return its value or the outcome."""
         profile = self.require_parameters()
@@ -289,12 +312,19 @@ def parameter_options(args: argparse.Namespace) -> ParameterOptions:
 
 def with_session(args, action: Callable[[Session], None], writes: bool = False) -> None:
     """Open the bus for the named device, run ``action``, close the bus."""
-    config, device = make_bus(args)
+    config, device, bus = make_bus(args)
     if writes:
         config, device = allow_writes(args, config, device)
-    session = Session(config, device)
+    run_session(config, device, bus, action)
+
+
+def run_session(config, device, bus: Dict[str, Any], action: Callable[[Session], None]) -> None:
+    """Open the bus for ``device``, run ``action``, close the bus; silence names the address."""
+    session = Session(config, device, bus=bus)
     try:
         action(session)
+    except NoResponse as error:
+        raise session.silent(error) from None
     finally:
         session.close()
 
@@ -396,7 +426,7 @@ def command_get(args, out) -> int:
     def get(session: Session) -> None:
         number = session.number(args.parameter)
         options = parameter_options(args)
-        spec = session.spec(number, options)
+        spec = session.typed_spec(args.parameter, number, options)
         value = session.parameter(number, options=options)
         print(value_line(session, number, spec, value), file=out)
     with_session(args, get)
@@ -408,7 +438,7 @@ def command_set(args, out) -> int:
     def set_(session: Session) -> None:
         number = session.number(args.parameter)
         options = parameter_options(args)
-        spec = session.spec(number, options)
+        spec = session.typed_spec(args.parameter, number, options)
         value = info.parse_value(spec, args.value)
         if spec is not None:
             reason = backup_file.value_reason(spec, value, session.factors)
@@ -447,8 +477,24 @@ def read_all(session: Session, numbers: List[int], label: str, args, out) -> Dic
     return values
 
 
+def check_backup_file(path: str, force: bool) -> None:
+    """Refuse a backup file that cannot be written, or exists (unless ``force``): read nothing."""
+    if os.path.isdir(path):
+        raise CliError(f'{path} is a directory: give the backup a file name', EXIT_USAGE)
+    if os.path.lexists(path) and not force:
+        raise CliError(f'{path} exists: nothing read; choose a new file name, or give --force '
+                       'to overwrite it', EXIT_USAGE)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise CliError(f'cannot write {path}: folder {folder} does not exist', EXIT_USAGE)
+    if not os.access(folder, os.W_OK):
+        raise CliError(f'cannot write {path}: no permission to write in {folder}', EXIT_USAGE)
+
+
 def command_backup(args, out) -> int:
     """Read every parameter of a device into a YAML file, read them again to verify."""
+    check_backup_file(args.file, args.force)
+
     def backup(session: Session) -> None:
         rows = backup_rows(session)
         numbers = [number for number, _ in rows]
@@ -472,7 +518,12 @@ def command_backup(args, out) -> int:
             session.name, session.device.family, session.profile.model,
             session.device.address,
             [backup_row(session, number, spec, values[number]) for number, spec in rows])
-        backup_file.write(args.file, content)
+        command = restore_command(args, session.config, session.device, session.profile.model)
+        try:
+            backup_file.write(args.file, content, command)
+        except OSError as error:
+            raise CliError(f'cannot write {args.file}: {error.strerror or error}: nothing '
+                           'saved') from None
         print(f'{len(rows)} parameters of {session.name} saved to {args.file} and verified',
               file=out)
     with_session(args, backup)
@@ -494,7 +545,7 @@ def command_restore(args, out) -> int:
         backup = backup_file.load(args.file)
     except backup_file.BackupError as error:
         raise CliError(str(error), EXIT_USAGE) from None
-    config, device = make_bus(args)
+    config, device, bus = make_bus(args)
     if backup.family != device.family:
         refuse_restore(backup, device.name, backup_file.kind_reasons(backup, device.family, ''))
     identity = backup_file.identity_reasons(backup, device.name, device.address)
@@ -504,11 +555,7 @@ def command_restore(args, out) -> int:
     if identity:
         warn(f'{"; ".join(identity)}: --force restores it to {device.name} all the same')
     config, device = allow_writes(args, config, device)
-    session = Session(config, device)
-    try:
-        restore_checked(session, backup, args, out)
-    finally:
-        session.close()
+    run_session(config, device, bus, lambda session: restore_checked(session, backup, args, out))
     return EXIT_OK
 
 
@@ -593,11 +640,7 @@ def how_far(session: Session, numbers: List[int], written: int,
 def command_scan(args, out) -> int:
     """Try every address in the range; print what answers, with family and model."""
     first, last = parse_range(args.addresses)
-    bus = bus_values_from(args)
-    if args.config:  # the bus of the parameters file, options winning; not its devices
-        from_file, _ = cfg.split_parameters(cfg.select_block(args.config, args.node))
-        bus = dict({key: value for key, value in from_file.items() if key != 'devices'},
-                   **bus)
+    bus = bus_values(args, file_block(args)[0])  # the file's bus, options winning
     config = cfg.build_config(dict(bus, devices=['probe']),
                               {'probe': {'family': SCAN_FAMILIES[0], 'address': first}})
     runner = open_runner(config)  # one port for the whole scan
@@ -642,12 +685,20 @@ def probe_session(bus: Dict[str, Any], family: str, address: int,
 
 
 def scan_address(bus: Dict[str, Any], address: int, runner: TransactionRunner) -> str:
+    """Return what answers at ``address`` in words, or '' if nothing does."""
+    found = identify(bus, address, runner)
+    return '' if found is None else found[1]
+
+
+def identify(bus: Dict[str, Any], address: int, runner: TransactionRunner) \
+        -> Optional[Tuple[Optional[str], str]]:
     """
-    Return what answers at ``address`` in words, or '' if nothing does.
+    Return (family, in words) of what answers at ``address``, or None if nothing does.
 
     FC-series drives are asked for their type text (par. 15-40) first, then MCD starters
     for their product word (40007); then the address is probed as a VLT 5000/6000 option
-    card (:func:`probe_option_card`). Silence at the first question ends the address.
+    card (:func:`probe_option_card`). Silence at the first question ends the address. The
+    family is None for a device that answers as none of them.
     """
     for family in SCAN_FAMILIES:
         session = None
@@ -656,20 +707,23 @@ def scan_address(bus: Dict[str, Any], address: int, runner: TransactionRunner) -
             if session is None:
                 continue
             reading = session.poll()
-            return unknown_drive_type(session.profile, reading.state) or \
-                f'{family} {session.profile.model}, state {reading.state}'
+            unknown = unknown_drive_type(session.profile, reading.state)
+            if unknown:
+                return 'vlt', unknown
+            return family, f'{family} {session.profile.model}, state {reading.state}'
         except LinkDown as error:
             raise CliError(str(error)) from None
         except NoResponse:
-            return ''  # nothing at this address: do not try the other families
+            return None  # nothing at this address: do not try the other families
         except (TransportError, CliError, ModelMismatch, ProtocolError, ValueError,
                 IndexError):
             continue
         finally:
             if session is not None:
                 session.close()
-    return probe_option_card(bus, address, runner) or \
-        'something answers, but not as any supported family'
+    card = probe_option_card(bus, address, runner)
+    return ('vlt', card) if card else \
+        (None, 'something answers, but not as any supported family')
 
 
 def unknown_drive_type(profile, state: str) -> str:
@@ -769,7 +823,8 @@ SUBCOMMANDS = {
                "table; MCD: parameters 1 to the model's last), read them all again, and "
                'save them if nothing changed in between. The file names the device, model, '
                'address and date, and for each parameter its number, PNU, name, unit and '
-               'value. Reads only.'),
+               'value; its first lines give the whole command that restores it. FILE must be '
+               'new (--force overwrites it). Reads only.'),
     'restore': ('write a YAML backup back and verify',
                 'Check the whole file first and write nothing unless all of it fits: family '
                 'and model (never overridable), device name and address (--force to restore '
@@ -806,15 +861,35 @@ def build_parser() -> argparse.ArgumentParser:
     _eeprom_option(set_)
     _parameter_options(set_)
     backup = add('backup', command_backup)
-    backup.add_argument('file', help='the YAML file to write')
+    backup.add_argument('file', help='the YAML file to write (a new file, unless --force)')
+    backup.add_argument('--force', action='store_true', help='overwrite FILE if it exists')
     restore = add('restore', command_restore, writes=True)
     restore.add_argument('file', help='a backup written by drive-bridge backup')
     _eeprom_option(restore)
     monitor = add('monitor', command_monitor)
-    monitor.add_argument('--period', type=float, default=0.5,
+    monitor.add_argument('--period', type=positive_seconds, default=0.5,
                          help='seconds between polls (default 0.5)')
-    monitor.add_argument('--count', type=int, default=0, help='stop after N polls (0: never)')
+    monitor.add_argument('--count', type=poll_count, default=0,
+                         help='stop after N polls (0: never)')
     return parser
+
+
+def positive_seconds(text: str) -> float:
+    """Return ``text`` as a positive, finite number of seconds (an argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f'{text!r} is not a positive number of seconds')
+    return value
+
+
+def poll_count(text: str) -> int:
+    """Return ``text`` as a whole number, 0 or more (an argparse type)."""
+    if not text.isdigit():
+        raise argparse.ArgumentTypeError(f'{text!r} is not a whole number, 0 or more')
+    return int(text)
 
 
 def _subcommand_adder(commands):
@@ -873,15 +948,41 @@ def _eeprom_option(parser: argparse.ArgumentParser) -> None:
 def _parameter_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group('drive parameters outside the built-in table (FC, VLT; '
                                       'MCD registers are raw 16-bit values)')
-    group.add_argument('--type', choices=sorted(DATA_TYPES) + [TEXT],
+    group.add_argument('--type', choices=PARAMETER_TYPES,
                        help='data type (manual: "Type")')
     group.add_argument('--conversion', type=int, help='conversion index, e.g. -2 for 0.01')
     group.add_argument('--index', type=int, help='array index of an array parameter')
 
 
+class _StderrLog(logging.Handler):
+    """The package's log lines (a pty opened without parity) on stderr, as drive-bridge's."""
+
+    def __init__(self):
+        super().__init__(logging.INFO)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        """Print the record's message in one line; a warning or error says so."""
+        level = '' if record.levelno < logging.WARNING else f'{record.levelname}: '
+        print(f'drive-bridge: {level}{record.getMessage()}', file=sys.stderr, flush=True)
+
+
 def main(argv: Optional[List[str]] = None, out=sys.stdout) -> int:
     """Run ``drive-bridge``; return the exit status."""
     args = build_parser().parse_args(argv)
+    logger = logging.getLogger('drive_bridge')
+    handler = _StderrLog()
+    logger.addHandler(handler)
+    level = logger.level
+    logger.setLevel(logging.INFO)
+    try:
+        return run_command(args, out)
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
+def run_command(args: argparse.Namespace, out) -> int:
+    """Run the command ``args`` names; return the exit status, with failures in one line."""
     try:
         return args.function(args, out)
     except CliError as error:

@@ -2,11 +2,14 @@
 
 from dataclasses import dataclass
 import os
+import stat
+from typing import NamedTuple
 
 from drive_bridge.protocol import rtu
 from drive_bridge.transport.protocols import PROTOCOLS
 
 URL_PREFIXES = ('socket://', 'rfc2217://', 'loop://')
+PTY_MAJORS = range(136, 144)  # Linux (devices.txt): char 136-143 are the Unix98 pty slaves
 
 
 @dataclass
@@ -56,6 +59,51 @@ class LinkSettings:
         return f'{self.protocol} {self.host}:{self.tcp_port}'
 
 
+class PortFraming(NamedTuple):
+    """The parity and stop bits a serial port is opened with, and why they differ, if so."""
+
+    parity: str
+    stopbits: int
+    note: str = ''  # '' when they are the link's own
+
+
+def pty_device(port: str) -> str:
+    """
+    Return the pseudo-terminal ``port`` leads to (``/dev/pts/3``), or '' if it is none.
+
+    Told by the device number of the node the path resolves to (a symlink such as the
+    simulator's ``--link`` is followed), not by its name.
+    """
+    if os.name != 'posix' or port.startswith(URL_PREFIXES):
+        return ''
+    try:
+        status = os.stat(port)
+    except OSError:
+        return ''
+    if not stat.S_ISCHR(status.st_mode) or os.major(status.st_rdev) not in PTY_MAJORS:
+        return ''
+    return os.path.realpath(port)
+
+
+def port_framing(settings: LinkSettings) -> PortFraming:
+    """
+    Return the framing to open a serial port with: the link's, or without parity on a pty.
+
+    A pty has no wire, so it has no parity either: Linux clears the parity flag a client
+    asks for, and refuses (EINVAL) every later open that asks for it again. A pty is
+    therefore opened without parity, and the note says so; whatever follows from the
+    framing (character time, frame gap, the meaning of ``stopbits: 0``) keeps the link's.
+    """
+    parity, stopbits = settings.effective_parity, settings.effective_stopbits
+    pty = '' if parity == 'N' else pty_device(settings.port)
+    if not pty:
+        return PortFraming(parity, stopbits)
+    shown = settings.port if pty == settings.port else f'{settings.port} ({pty})'
+    return PortFraming('N', stopbits, (
+        f'{shown} is a pty: opened without parity (a pty has no wire, so no parity); '
+        f'timing as configured, {settings.baudrate} baud 8{parity}{stopbits}'))
+
+
 def port_missing(settings: LinkSettings) -> bool:
     """Return whether a serial device path does not exist (URLs are never missing)."""
     return settings.is_serial and not settings.port.startswith(URL_PREFIXES) and \
@@ -67,8 +115,6 @@ def open_hint(settings: LinkSettings) -> str:
     if settings.is_serial and not settings.port.startswith(URL_PREFIXES) and \
             not os.access(settings.port, os.R_OK | os.W_OK):
         return ' (permission denied: add the user to the dialout group)'
-    if settings.is_serial and settings.parity != 'N' and '/pts/' in settings.port:
-        return ' (a pty accepts parity N only)'
     return ''
 
 

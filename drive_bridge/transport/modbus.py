@@ -18,9 +18,9 @@ from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import (  # noqa: F401 - LinkSettings, wire_time_s re-exported
-    LinkSettings, open_hint, port_missing, wire_time_s)
+    LinkSettings, port_framing, port_missing, PortFraming, wire_time_s)
 from drive_bridge.transport.port_owner import in_use_text, lock_holders
-from drive_bridge.transport.serial_port import PORT_ERRORS
+from drive_bridge.transport.serial_port import note_framing, open_serial, PORT_ERRORS
 import pymodbus
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -52,6 +52,7 @@ class ModbusTransport(Transport):
         super().__init__(settings)
         self._client = None
         self._received = bytearray()
+        self._framing_noted = False  # the note of a pty's framing is logged once
 
     # -- connection ---------------------------------------------------------------------
     @property
@@ -65,17 +66,24 @@ class ModbusTransport(Transport):
         settings = self.settings
         if port_missing(settings):
             raise LinkDown(f'bus offline: {settings.port} not found')
-        client = self._make_client()
+        framing = port_framing(settings) if settings.is_serial else None
+        client = self._make_client(framing)
         try:
             ok = client.connect()
-        except (OSError, ModbusException) as error:
+        except (*PORT_ERRORS, ModbusException) as error:  # pymodbus 3.6 lets some through
+            client.close()
+            if framing is not None:
+                self._why_not_open(framing)
             raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}') from error
         if not ok:
             client.close()
             if settings.is_serial and lock_holders(settings.port):  # pymodbus opens exclusively
                 raise LinkDown(f'bus offline: {in_use_text(settings.port)}')
-            raise LinkDown(f'bus offline: cannot open {settings.describe()}'
-                           + open_hint(settings))
+            if framing is not None:
+                self._why_not_open(framing)
+            raise LinkDown(f'bus offline: cannot open {settings.describe()}')
+        if framing is not None:
+            self._framing_noted = note_framing(framing, self._framing_noted)
         if hasattr(client, '_recv_interval'):
             # pymodbus >= 3.10 polls the port every 4 characters and ends a read when a poll
             # sees no new byte, which adds up to 8 character times to every reply. Its
@@ -83,7 +91,16 @@ class ModbusTransport(Transport):
             client._recv_interval = RECEIVE_POLL_INTERVAL_S
         self._client = client
 
-    def _make_client(self):
+    def _why_not_open(self, framing: PortFraming) -> None:
+        """
+        Raise LinkDown saying why the serial port did not open (returns if it opens now).
+
+        pymodbus only logs why (and returns False): the port is opened once more, the same
+        way, to learn the reason, and closed again.
+        """
+        open_serial(self.settings, framing).close()
+
+    def _make_client(self, framing: Optional[PortFraming]):
         settings = self.settings
         common = {'timeout': settings.timeout_s, 'retries': 0}
         serial_extra = {}
@@ -92,10 +109,10 @@ class ModbusTransport(Transport):
         else:  # pymodbus 3.6: no retry on empty, no strict character timing
             common.update(retry_on_empty=False, reconnect_delay=0)
             serial_extra['strict'] = False
-        if settings.is_serial:
+        if framing is not None:
             return ModbusSerialClient(
                 port=settings.port, framer=_Framer.RTU, baudrate=settings.baudrate,
-                bytesize=8, parity=settings.parity, stopbits=settings.effective_stopbits,
+                bytesize=8, parity=framing.parity, stopbits=framing.stopbits,
                 handle_local_echo=settings.local_echo, **serial_extra, **common)
         framer = _Framer.SOCKET if settings.protocol == 'modbus_tcp' else _Framer.RTU
         return ModbusTcpClient(host=settings.host, port=settings.tcp_port, framer=framer,

@@ -14,6 +14,7 @@ and reads what is there: only the number of wake-ups differs, never what is read
 """
 
 import errno
+import logging
 import os
 import select
 import time
@@ -21,7 +22,8 @@ from typing import Callable, List, Optional
 
 from drive_bridge.errors import LineBabble, LinkDown
 from drive_bridge.transport.base import Transport
-from drive_bridge.transport.link import LinkSettings, open_hint, port_missing, URL_PREFIXES
+from drive_bridge.transport.link import (
+    LinkSettings, open_hint, port_framing, port_missing, PortFraming, URL_PREFIXES)
 from drive_bridge.transport.port_owner import in_use_text
 import serial
 
@@ -39,6 +41,7 @@ PORT_ERRORS = (serial.SerialException, OSError, TermiosError)
 EARLY_WAKE_S = 0.002  # how much before a reply's end a wait for it ends
 MIN_DRAIN_SILENCE_S = 0.005
 MAX_VMIN = 255  # VMIN is one byte of the terminal's settings
+LOG = logging.getLogger(__name__)
 
 
 def exclusive_open(port: str) -> bool:
@@ -50,6 +53,70 @@ def lock_refused(error: Exception) -> bool:
     """Return whether opening failed because another program holds the port's lock."""
     return 'exclusively lock' in str(error) or \
         getattr(error, 'errno', None) in (errno.EAGAIN, errno.EWOULDBLOCK)
+
+
+def error_number(error: BaseException) -> Optional[int]:
+    """
+    Return the errno behind a failed open, if any tells it.
+
+    pyserial raises termios' error as it is (``(22, 'Invalid argument')``), or wraps it in a
+    SerialException whose errno is lost (``Could not configure port: ...``) but whose
+    context still holds it.
+    """
+    seen: Optional[BaseException] = error
+    while seen is not None:
+        code = getattr(seen, 'errno', None)
+        if code is None and isinstance(seen, TermiosError) and seen.args and \
+                isinstance(seen.args[0], int):
+            code = seen.args[0]
+        if code:
+            return code
+        seen = seen.__cause__ or seen.__context__
+    return None
+
+
+def refusal_text(settings: LinkSettings, framing: PortFraming, error: BaseException) -> str:
+    """Return why the port did not open, in one line naming what it refused."""
+    port, code = settings.port, error_number(error)
+    if code == errno.EINVAL:
+        return (f'cannot open {port}: the port refused baudrate {settings.baudrate}, parity '
+                f'{framing.parity}, stopbits {framing.stopbits} (EINVAL): its adapter or '
+                'driver does not take these settings; check baudrate, parity and stopbits')
+    if code == errno.ENOTTY:
+        return (f'cannot open {port}: it is not a serial port (it has no terminal settings, '
+                'ENOTTY)')
+    if code == errno.EISDIR:
+        return f'cannot open {port}: it is a directory, not a serial port'
+    return f'cannot open {settings.describe()}: {error}' + open_hint(settings)
+
+
+def open_serial(settings: LinkSettings, framing: PortFraming,
+                open_port: Optional[Callable[..., object]] = None):
+    """
+    Open the link's port with ``framing``; raise LinkDown with the reason in words.
+
+    ``open_port`` defaults to pyserial's ``serial_for_url``. A local port is opened
+    exclusively: another program holding it is named.
+    """
+    exclusive = {'exclusive': True} if exclusive_open(settings.port) else {}
+    try:
+        return (open_port or serial.serial_for_url)(
+            settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
+            parity=PARITIES[framing.parity], stopbits=STOPBITS[framing.stopbits],
+            timeout=0,  # reads return what is there; the waiting is done by select
+            **exclusive)
+    except (*PORT_ERRORS, ValueError) as error:
+        if exclusive and lock_refused(error):
+            raise LinkDown(f'bus offline: {in_use_text(settings.port)}') from error
+        raise LinkDown(f'bus offline: {refusal_text(settings, framing, error)}') from error
+
+
+def note_framing(framing: PortFraming, noted: bool) -> bool:
+    """Log the note of a framing that is not the link's (a pty), once; return if noted."""
+    if framing.note and not noted:
+        LOG.info(framing.note)
+        return True
+    return noted
 
 
 def direct_descriptor(port) -> Optional[int]:
@@ -95,15 +162,16 @@ class SerialPortTransport(Transport):
         self._fd: Optional[int] = None  # a local POSIX port's descriptor, read directly
         self._terminal: Optional[List] = None  # its terminal settings, to set VMIN with
         self._vmin = -1  # the VMIN set on it now (-1: not known)
+        self._framing_noted = False  # the note of a pty's framing is logged once
 
     @property
     def connected(self) -> bool:
         """Return whether the port is open."""
         return self._port is not None
 
-    def framing(self) -> tuple:
-        """Return (parity, stop bits) to open the port with."""
-        return self.settings.effective_parity, self.settings.effective_stopbits
+    def framing(self) -> PortFraming:
+        """Return the framing to open the port with (a pty: without parity)."""
+        return port_framing(self.settings)
 
     def connect(self) -> None:
         """Open the port; raise LinkDown with the reason in words."""
@@ -111,19 +179,9 @@ class SerialPortTransport(Transport):
         settings = self.settings
         if port_missing(settings):
             raise LinkDown(f'bus offline: {settings.port} not found')
-        parity, stopbits = self.framing()
-        exclusive = {'exclusive': True} if exclusive_open(settings.port) else {}
-        try:
-            self._port = self._open_port(
-                settings.port, baudrate=settings.baudrate, bytesize=serial.EIGHTBITS,
-                parity=PARITIES[parity], stopbits=STOPBITS[stopbits],
-                timeout=0,  # reads return what is there; the waiting is done by select
-                **exclusive)
-        except (*PORT_ERRORS, ValueError) as error:
-            if exclusive and lock_refused(error):
-                raise LinkDown(f'bus offline: {in_use_text(settings.port)}') from error
-            raise LinkDown(f'bus offline: cannot open {settings.describe()}: {error}'
-                           + open_hint(settings)) from error
+        framing = self.framing()
+        self._port = open_serial(settings, framing, self._open_port)
+        self._framing_noted = note_framing(framing, self._framing_noted)
         self._fd = direct_descriptor(self._port)
         self._terminal = None if self._fd is None else terminal_settings(self._fd)
         self._vmin = -1

@@ -6,6 +6,7 @@ from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import CommandRefused
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
+from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
 from integration_helpers import wait_until
 import pytest
 
@@ -122,3 +123,22 @@ def test_a_single_busy_refusal_is_counted_not_a_change_of_state(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('aux').poll_failure == '', 3.0)  # the next poll
     assert not [e for e in bus.events[events:] if e.device == 'aux' and
                 e.kind in ('error', 'offline')]
+
+
+@pytest.mark.parametrize('engine', SERIAL_ENGINES)
+def test_a_bus_restarted_on_a_pty_with_parity_e_is_online_every_time(sim_bus, engine):
+    # A restarted node opened the simulator's pty with parity E once; every later start
+    # found the link offline with "(22, 'Invalid argument')".
+    settings = LinkSettings(port=sim_bus.pty_path, parity='E', timeout_s=0.3)
+    for _ in range(3):
+        events = []
+        master = BusMaster(make_transport(settings, {'serial_engine': engine}),
+                           [DeviceSpec('main', 20, McdProfile('auto'), poll_rate_hz=20.0)],
+                           BusTiming(backoff_max_s=2.0), listener=events.append)
+        master.start()
+        try:
+            assert wait_until(lambda: any(e.kind == 'reading' for e in list(events)), 3.0), \
+                [event.message for event in events]
+        finally:
+            master.shutdown(stop_motors=False)
+        assert not [event.message for event in events if event.kind == 'offline']

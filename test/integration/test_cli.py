@@ -10,6 +10,7 @@ import io
 import os
 import pty
 import re
+import shlex
 import signal
 import struct
 import subprocess
@@ -19,6 +20,7 @@ import time
 
 from drive_bridge.bus.runner import TransactionRunner
 from drive_bridge.protocol import rtu
+from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from drive_bridge.tools.cli import main
@@ -517,8 +519,9 @@ def test_node_picks_the_block_of_a_file_with_two_nodes(line, tmp_path, capsys):
     (['set', '--family', 'mcd', '--address', 20, '4', '1', '--eeprom'], 2, 'do not apply'),
     (['scan', '--addresses', '40-2'], 2, 'must lie within 1-247, low to high'),
     (['status'], 2, 'name the device: --config FILE'),
-    (['status', '--family', 'mcd', '--address', 150], 2, 'out of range for family mcd'),
-    (['status', '--family', 'fc', '--address', 9], 1, 'no reply within 0.5 s'),
+    (['status', '--family', 'mcd', '--address', 150], 2, '--address 150: allowed 1-99 for mcd'),
+    (['status', '--family', 'fc', '--address', 9], 1, 'fc_9: no reply from address 9 within '
+     '0.5 s'),
     (['restore', '--family', 'fc', '--address', 1, '/nonexistent.yaml'], 2, 'cannot read'),
 ])
 def test_bad_arguments_get_one_clear_line(line, capsys, argv, code, message):
@@ -556,6 +559,223 @@ def test_the_node_prints_usage_for_help():
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and done.stdout.startswith('usage: drive_bridge_node')
     assert 'error' not in done.stderr.lower()
+
+
+# -- the first hour: parity on a pty, and messages in the user's words -------------------------
+PTY_NOTE = 'is a pty: opened without parity (a pty has no wire, so no parity); timing as ' \
+    'configured, 9600 baud 8E1'
+
+
+def test_a_pty_takes_the_configured_parity_e_run_after_run_and_after_a_scan(line, capsys):
+    # On a pty Linux takes parity E on the first open only: the next run (a status after a
+    # scan) failed with "(22, 'Invalid argument')". The README's commands do that.
+    port = ['--port', line.pty_path, '--quiet']
+    for argv in (['scan', *port, '--addresses', '1-1'], ['status', *port, *FC51],
+                 ['status', *port, *FC51], ['get', *port, *FC51, '3-41']):
+        code, out = run(*argv)
+        assert code == 0 and out, argv
+        assert capsys.readouterr().err == f'drive-bridge: {line.pty_path} {PTY_NOTE}\n', argv
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['status', '--family', 'fc', '--address', 300], '--address 300: allowed 1-247 for fc'),
+    (['status', '--family', 'fc', '--address', 200, '--protocol', 'fc_protocol'],
+     '--address 200: allowed 1-126 for fc on protocol fc_protocol'),
+    (['status', '--family', 'fc', '--model', 'fc99', '--address', 1],
+     '--model fc99: allowed auto, fc51 for family fc'),
+    (['status', '--family', 'vlt', '--address', 5],
+     '--family vlt needs --model (vlt5000 or vlt6000): this family cannot tell its model'),
+    (['status', '--family', 'lvsg', '--address', 1], '--family lvsg needs --config: '
+     'gateway_input_register and gateway_output_register are settings that only a '
+     'parameters file gives'),
+    (['status', '--family', 'fc', '--address', 1, '--protocol', 'ap_ascii'],
+     'family fc does not run on protocol ap_ascii: it runs on modbus_rtu, '),
+    (['status', '--family', 'mcd', '--address', 1, '--protocol', 'ap_ascii', '--parity', 'E'],
+     '--parity E: protocol ap_ascii is always 8N1: give --parity N or leave it out'),
+    (['status', '--family', 'mcd', '--address', 1, '--protocol', 'ap_ascii', '--timeout',
+      0.1], '--timeout 0.1: allowed [0.25, 10] on protocol ap_ascii'),
+    (['status', '--family', 'fc', '--address', 1, '--timeout', 99],
+     '--timeout 99: allowed [0.02, 10]'),
+    (['status', '--family', 'fc', '--address', 1, '--baudrate', 1234],
+     '--baudrate 1234: allowed 1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200'),
+    (['status', '--family', 'fc', '--address', 1, '--tcp-port', 0],
+     '--tcp-port 0: allowed [1, 65535]'),
+    (['scan', '--addresses', '1-2', '--timeout', 0.01], '--timeout 0.01: allowed [0.02, 10]'),
+    (['status', '--family', 'fc', '--address', 1, '--port', ''], '--port is empty'),
+])
+def test_a_bad_option_is_named_as_it_was_typed(capsys, argv, message):
+    assert run(*argv)[0] == 2
+    error = one_line(capsys)
+    assert error == f'drive-bridge: {message}\n' or \
+        error.startswith(f'drive-bridge: {message}'), error
+    assert "parameter '" not in error and '_1.' not in error and '_300' not in error
+
+
+def test_protocol_ap_ascii_alone_takes_its_8n1_without_a_parity_option(capsys):
+    server = make_ap_ascii_server({20: 'mcd500'})
+    server.open_pty()
+    server.start()
+    try:
+        code, out = run('status', '--protocol', 'ap_ascii', '--port', server.pty_path,
+                        '--family', 'mcd', '--address', 20)
+    finally:
+        server.stop()
+    assert code == 0 and out.startswith('mcd_20: mcd auto at address 20'), \
+        capsys.readouterr().err
+    assert capsys.readouterr().err == ''  # 8N1: opened as it is, nothing to say
+
+
+def test_a_silent_address_is_named_with_what_was_asked(line, capsys):
+    code, _ = run('status', *bus(line), '--family', 'fc', '--address', 9)
+    assert code == 1 and one_line(capsys) == (
+        f'drive-bridge: fc_9: no reply from address 9 within 0.5 s (modbus_rtu, '
+        f'{line.pty_path} 115200 N2): is a device at that address, on this line, with this '
+        'protocol, baud rate and parity?\n')
+    code, _ = run('get', *bus(line), '--family', 'fc', '--model', 'fc51', '--address', 9,
+                  '3-41')
+    assert code == 1 and 'no reply from address 9 to read ' in one_line(capsys)
+
+
+@pytest.mark.parametrize('device, typed, told', [
+    (FC51, '3-99', 'parameter 3-99 (PNU 399) is not in the fc51 table'),
+    (FC51, '399', 'parameter 399 is read as 3-99 (PNU 399), which is not in the fc51 table'),
+    (['--family', 'vlt', '--model', 'vlt5000', '--address', 5], '3-99',
+     'parameter 3-99 is read as 399 (PNU 399), which is not in the vlt5000 table'),
+])
+def test_a_parameter_outside_the_table_says_how_it_was_read_and_what_to_give(
+        line, capsys, device, typed, told):
+    for command in (['get'], ['set', '--force']):
+        code, _ = run(command[0], *bus(line), *device, typed, *(['5'] * (command[0] == 'set')))
+        assert code == 2
+        error = one_line(capsys)
+        assert error.startswith(f'drive-bridge: {told}: give its data type with --type (int16, '
+                                'int32, int8, uint16, uint32, uint8, text) and its conversion '
+                                'index with --conversion'), error
+    assert not writes_to(line, device[-1])
+
+
+@pytest.mark.parametrize('argv, told', [
+    (['status', '--family', 'mcd', '--address', 1], 'mcd_1: address 1 answers as fc fc51, '
+     'state ready, not as family mcd: give --family fc'),
+    (['get', '--family', 'mcd', '--address', 1, 4], 'mcd_1: address 1 answers as fc fc51'),
+    (['status', '--family', 'fc', '--address', 20], 'fc_20: address 20 answers as mcd mcd500, '
+     'state ready, not as family fc: give --family mcd'),
+    (['status', '--family', 'vlt', '--model', 'vlt5000', '--address', 1],
+     'vlt_1: address 1 answers as fc fc51'),
+    (['backup', '--family', 'mcd', '--address', 1, 'x.yaml'],
+     'mcd_1: address 1 answers as fc fc51'),
+])
+def test_a_family_that_does_not_fit_the_device_at_the_address_says_what_answers(
+        line, capsys, tmp_path, monkeypatch, argv, told):
+    monkeypatch.chdir(tmp_path)
+    code, _ = run(*argv, *bus(line))
+    assert code == 2
+    assert one_line(capsys).startswith(f'drive-bridge: {told}')
+    assert not [frame for unit in LINE for frame in writes_to(line, unit)]
+    assert not os.listdir(tmp_path)
+
+
+def test_backup_refuses_an_existing_file_reading_nothing_unless_force(line, tmp_path, capsys):
+    path = tmp_path / 'feeder.yaml'
+    path.write_text('my notes\n')
+    line.stats.frames.clear()
+    code, _ = run('backup', *bus(line), *FC51, path)
+    assert code == 2 and one_line(capsys) == (
+        f'drive-bridge: {path} exists: nothing read; choose a new file name, or give --force '
+        'to overwrite it\n')
+    assert path.read_text() == 'my notes\n' and not line.stats.frames
+    code, out = run('backup', *bus(line), *FC51, '--force', path)
+    assert code == 0 and out == f'29 parameters of fc_1 saved to {path} and verified\n'
+    assert yaml.safe_load(path.read_text())['model'] == 'fc51'
+    assert sorted(os.listdir(tmp_path)) == ['feeder.yaml']  # no temporary file left
+
+
+@pytest.mark.parametrize('where, told', [
+    ('.', 'is a directory: give the backup a file name'),
+    ('missing/feeder.yaml', 'does not exist'),
+])
+def test_backup_refuses_a_file_it_cannot_write_before_reading(
+        line, tmp_path, capsys, where, told):
+    line.stats.frames.clear()
+    code, _ = run('backup', *bus(line), *FC51, tmp_path / where)
+    assert code == 2 and told in one_line(capsys)
+    assert not line.stats.frames
+
+
+def header_command(path) -> list:
+    """Return the restore command a backup's header gives, as arguments of drive-bridge."""
+    lines = path.read_text().splitlines()
+    assert lines[0].endswith('Restore it with:') and lines[1].startswith('#   drive-bridge ')
+    return shlex.split(lines[1][len('#   drive-bridge '):])
+
+
+def test_the_backup_header_gives_the_whole_restore_command_and_it_restores(line, tmp_path):
+    path = backup(line, tmp_path, ['--timeout', 0.3, *FC51])
+    command = header_command(path)
+    assert command == ['restore', '--port', line.pty_path, '--baudrate', '115200', '--parity',
+                       'N', '--timeout', '0.3', '--family', 'fc', '--model', 'fc51',
+                       '--address', '1', str(path)]
+    model(line, 1).parameters[341] = 999
+    code, out = run(*command)
+    assert code == 0 and '29 parameters restored to fc51 fc_1 and verified' in out
+    assert model(line, 1).parameters[341] == 300
+
+
+def test_the_backup_header_of_a_device_in_a_parameters_file_names_the_file(line, tmp_path):
+    config = params_file(tmp_path, line)
+    path = tmp_path / 'crusher.yaml'
+    assert run('backup', '--config', config, '--device', 'crusher', '--quiet', path)[0] == 0
+    command = header_command(path)
+    assert command == ['restore', '--config', str(config), '--device', 'crusher', str(path)]
+    model(line, 20).parameters[4] += 5
+    code, out = run(*command, '--quiet')
+    assert code == 0 and 'restored to mcd500 crusher and verified' in out
+    assert model(line, 20).parameters[4] == yaml.safe_load(path.read_text())[
+        'parameters'][3]['value']
+
+
+@pytest.mark.parametrize('key, value, told', [
+    ('baud_rate', 9600, "unknown parameter 'baud_rate': known bus parameters are protocol, "),
+    ('feeder.pollrate', 5.0, "unknown parameter 'feeder.pollrate': a fc device takes family, "),
+    ('feeder.start_time', 3.0, "unknown parameter 'feeder.start_time': a fc device takes "),
+    ('crusher.comms_timeout', 1.0, "parameter 'crusher.comms_timeout' applies to families fc, "
+     'vlt only'),
+    ('address_format', '1-31', "parameter 'address_format' applies to protocol fc_protocol "
+     'only, not modbus_rtu'),
+    ('mixer.family', 'fc', "parameter 'mixer.family': 'mixer' is not a listed device (devices: "
+     'feeder, crusher)'),
+])
+def test_a_parameters_file_is_refused_for_a_name_the_node_refuses(
+        line, tmp_path, capsys, key, value, told):
+    config = params_file(tmp_path, line)
+    content = yaml.safe_load(config.read_text())
+    content['/**/drive_bridge']['ros__parameters'][key] = value
+    config.write_text(yaml.safe_dump(content))
+    line.stats.frames.clear()
+    for argv in (['status', '--device', 'feeder'], ['scan', '--addresses', '1-1']):
+        assert run(argv[0], '--config', config, '--quiet', *argv[1:])[0] == 2
+        error = one_line(capsys)
+        assert error.startswith(f'drive-bridge: {config}: {told}'), error
+        assert error.endswith(' (the node refuses it too)\n'), error
+    assert not line.stats.frames  # refused before the port was opened
+
+
+def test_a_port_that_is_no_serial_port_is_named_as_such(tmp_path, capsys):
+    for port, told in (('/dev/null', 'cannot open /dev/null: it is not a serial port (it has '
+                        'no terminal settings, ENOTTY)'),
+                       (tmp_path, f'cannot open {tmp_path}: it is a directory, not a serial '
+                        'port')):
+        assert run('status', '--port', port, *FC51)[0] == 1
+        assert one_line(capsys) == f'drive-bridge: bus offline: {told}\n'
+
+
+@pytest.mark.parametrize('argv', [['--period', 'inf'], ['--period', '0'], ['--count', '-1']])
+def test_monitor_refuses_a_period_or_count_it_cannot_keep(capsys, argv):
+    with pytest.raises(SystemExit) as exited:
+        main(['monitor', '--port', '/dev/null', *[str(arg) for arg in FC51], *argv])
+    error = capsys.readouterr().err
+    assert exited.value.code == 2 and f'argument {argv[0]}: ' in error, error
+    assert 'Traceback' not in error
 
 
 # -- processes: Ctrl-C, progress on a terminal, exclusive ports -----------------------------
@@ -616,6 +836,7 @@ def test_progress_goes_to_stderr_only_on_a_terminal(line, tmp_path):
         os.close(controller)
     assert out == f'29 parameters of fc_1 saved to {path} and verified\n'
     assert b'reading' in drawn and b'/29 [' in drawn and b'verifying' in drawn
-    piped = cli_process(*argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    piped = cli_process(*argv, '--force', stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                        text=True)
     out, error = piped.communicate(timeout=60)
     assert piped.returncode == 0 and error == '' and out.endswith('and verified\n')

@@ -1,10 +1,11 @@
 """
 The manual's command examples, run as written against the simulators (no ROS).
 
-- ``<!-- test: drive-bridge against drive_bridge_sim OPTIONS -->``: the simulator the marker
-  names stands in for ``/dev/ttyUSB0`` (RTU or FC protocol over TCP); each ``drive-bridge``
-  command of the block runs with ``config/`` beside it and must print the ``#   `` lines
-  under it. The commissioning page's writes are read back from the simulated devices.
+- ``<!-- test: drive-bridge against drive_bridge_sim OPTIONS -->``: the simulator the
+  marker names stands in for ``/dev/ttyUSB0`` on its pty, with the page's framing as written
+  (parity E); each ``drive-bridge`` command of the block runs with ``config/`` beside it and
+  must print the ``#   `` lines under it. The commissioning page's writes are read back from
+  the simulated devices.
 - ``<!-- test: sim -->``: each ``drive_bridge_sim`` command starts and serves (its ``--link``
   paths and TCP ports replaced, so that test runs can share a machine), then ends on SIGTERM.
 - ``<!-- test: parse -->``: each recording command parses with the command's own parser
@@ -34,12 +35,12 @@ def marked(prefix: str) -> list:
 
 
 def simulated_port(marker: str):
-    """Start the simulator the marker names, over TCP; return (server, socket URL)."""
+    """Start the simulator the marker names on a pty; return (server, the pty's path)."""
     args = sim_cli.build_parser().parse_args(words(marker[len(AGAINST):]))
     server = sim_cli.build_server(args)
-    port = server.open_tcp('127.0.0.1', 0, 'rtu')
+    path = server.open_pty()
     server.start()
-    return server, f'socket://127.0.0.1:{port}'
+    return server, path
 
 
 @pytest.mark.parametrize('block', marked(AGAINST), ids=lambda block: block.where)

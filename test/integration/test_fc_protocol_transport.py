@@ -1,5 +1,6 @@
 """The FC-protocol transport against the FC-protocol simulator over a pty, and on fake ports."""
 
+import logging
 import time
 
 from drive_bridge.errors import (
@@ -39,6 +40,22 @@ def line():
 
 def model(server, address):
     return server.devices[address].model
+
+
+def test_a_pty_with_the_fc_protocol_s_8e1_opens_every_time_and_says_so_once(line, caplog):
+    server, first = line
+    first.close()  # one master on the line
+    caplog.set_level(logging.INFO, logger='drive_bridge')
+    transport = FcProtocolTransport(fc_settings(server.pty_path, parity='E'))
+    for _ in range(3):
+        transport.connect()
+        reply = transport.execute(FC51, fc.process_request(0, 0))
+        assert reply.pcd1 == model(server, FC51).status_word()
+        transport.close()
+    notes = [record.getMessage() for record in caplog.records
+             if record.name.startswith('drive_bridge')]
+    assert notes == [f'{server.pty_path} is a pty: opened without parity (a pty has no wire, '
+                     'so no parity); timing as configured, 9600 baud 8E1']
 
 
 def test_process_data_and_a_parameter_read_in_one_telegram(line):

@@ -1,6 +1,7 @@
 """Both serial engines (native, pymodbus pinned and 3.6.9) against the simulated MCD module."""
 
 import contextlib
+import logging
 import os
 import select
 import sys
@@ -14,6 +15,7 @@ from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.sim.mcd_device import make_mcd_server as make_server
 from drive_bridge.transport import serial_port
+from drive_bridge.transport.link import PortFraming
 from drive_bridge.transport.modbus import LinkSettings
 from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
 from drive_bridge.transport.serial_port import direct_descriptor
@@ -79,6 +81,41 @@ def test_corrupted_reply_is_a_bad_frame(pty_transport, sim_bus):
         pytest.fail(f'corrupted reply classified as silence: {error.value}')
     sim_bus.reply_hook = None
     assert pty_transport.execute(20, ReadRegisters(2, 6))
+
+
+@pytest.mark.parametrize('engine', SERIAL_ENGINES)
+def test_a_pty_with_parity_e_opens_every_time_and_the_log_says_why_once(
+        sim_bus, tmp_path, engine, caplog):
+    # Linux clears the parity a pty client asks for and refuses the next open that asks
+    # again (EINVAL): the node restarted, or the CLI run again after a scan, found the
+    # simulator's pty "invalid". The pty is opened without parity; the timing stays 8E1.
+    caplog.set_level(logging.INFO, logger='drive_bridge')
+    link = tmp_path / 'ttyLINK'  # through a symlink, as drive_bridge_sim --link makes it
+    link.symlink_to(sim_bus.pty_path)
+    settings = LinkSettings(port=str(link), parity='E', timeout_s=0.3)
+    for transport_number in range(2):  # a node started twice
+        transport = make_transport(settings, {'serial_engine': engine})
+        for _ in range(3):  # reconnects of one node
+            transport.connect()
+            assert transport.execute(20, ReadRegisters(2, 6))[4] == MCD500_PRODUCT
+            transport.close()
+    notes = [record for record in caplog.records if record.name.startswith('drive_bridge')]
+    assert [record.levelno for record in notes] == [logging.INFO] * 2, caplog.text
+    assert notes[0].getMessage() == (
+        f'{link} ({sim_bus.pty_path}) is a pty: opened without parity (a pty has no wire, so '
+        'no parity); timing as configured, 9600 baud 8E1')
+    assert settings.effective_stopbits == 1 and settings.frame_gap_s == \
+        rtu.frame_gap_s(9600, 'E', 1)
+
+
+def test_the_native_engine_opens_a_pty_8n1_for_8e1_and_keeps_the_8e1_character_time(sim_bus):
+    settings = LinkSettings(port=sim_bus.pty_path, parity='E', timeout_s=0.3)
+    transport = make_transport(settings, {'serial_engine': 'native'})
+    framing = transport.framing()
+    assert framing[:2] == ('N', 1)  # stopbits 0 means 1 for parity E, on a pty too
+    assert transport._char_s == rtu.character_time_s(9600, 'E', 1)
+    assert make_transport(LinkSettings(port=sim_bus.pty_path, parity='N'),
+                          {'serial_engine': 'native'}).framing() == PortFraming('N', 2)
 
 
 @pytest.mark.parametrize('engine', SERIAL_ENGINES)

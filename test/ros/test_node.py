@@ -135,6 +135,7 @@ def test_allow_control_set_at_runtime(node, sim):
     ({}, {'timeout': 0.001}, "'timeout' = 0.001 is out of range: allowed [0.02, 10]"),
     ({}, {'retries': 11}, "'retries' = 11 is out of range: allowed [0, 10]"),
     ({'comms_timeout': 1.0}, {}, "'main.comms_timeout' applies to families fc, vlt only"),
+    ({}, {'baud_rate': 9600}, "unknown parameter 'baud_rate': known bus parameters are "),
 ])
 def test_config_errors_stop_the_node_with_one_line(tmp_path, device, bus, expected):
     params = write_params(tmp_path / 'bad.yaml', {'port': '/dev/null', **bus},
@@ -195,6 +196,25 @@ def test_sigterm_stops_the_motor_this_node_started(tmp_path):
         assert 'stop acknowledged by solo' in stderr
     finally:
         server.stop()
+
+
+def test_a_restarted_node_opens_the_simulator_s_pty_with_parity_e_and_logs_why(tmp_path):
+    # Linux takes parity E on a pty once: the restarted node found the link offline with
+    # "(22, 'Invalid argument')". The pty is opened without parity, and the log says so.
+    with serving(make_mcd_server({20: 'mcd500'})) as server:
+        for _ in range(2):
+            with running_node(tmp_path / 'bus.yaml', {'port': server.pty_path, 'parity': 'E'},
+                              {'main': {'family': 'mcd', 'address': 20}},
+                              ready=['main']) as client:
+                assert client.spin_until(lambda: 'is a pty' in node_output(client.process))
+                assert client.wait_state('main', 'ready')
+                log = node_output(client.process)
+            notes = [line for line in log.splitlines() if 'is a pty' in line]
+            assert len(notes) == 1 and '[INFO]' in notes[0], log
+            assert 'offline' not in log, log
+            assert notes[0].endswith(f'{server.pty_path} is a pty: opened without parity (a pty '
+                                     'has no wire, so no parity); timing as configured, 9600 '
+                                     'baud 8E1'), log
 
 
 def test_the_nested_parameter_file_form_of_the_ros2_docs(tmp_path):

@@ -13,11 +13,11 @@ import os
 import time
 
 from docs_helpers import parameter_reference
+from drive_bridge import config
 from rcl_interfaces.srv import ListParameters
 import rclpy
 from ros_helpers import node_output, start_node, stop_node, write_params
 
-ROS_OWN = {'use_sim_time', 'start_type_description_service'}  # rclpy declares these
 LVSG = {'family': 'lvsg', 'model': 'mcd202', 'address': 2, 'gateway_input_register': 0,
         'gateway_output_register': 100}
 NODES = {
@@ -58,7 +58,8 @@ def declared_parameters(protocol, devices, tmp_path):
 def test_the_reference_lists_exactly_the_parameters_the_node_declares(tmp_path):
     declared = {'bus': set(), 'device': set()}
     for protocol, devices in NODES.items():
-        for name in declared_parameters(protocol, devices, tmp_path) - ROS_OWN:
+        names = declared_parameters(protocol, devices, tmp_path)
+        for name in names - set(config.ROS_PARAMETERS):
             device, _, setting = name.partition('.')
             if setting:
                 assert device in devices, name

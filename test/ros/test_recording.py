@@ -20,9 +20,11 @@ import time
 from typing import Dict, List, Tuple
 from xml.etree import ElementTree
 
+from drive_bridge.bag_metadata import REFERENCE_AT_START
 from drive_bridge.ros.recorder import BagRecorder
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.tools.plot_recording import main as plot_main, panels_of, read_recording
+from missing_module import run_without
 import pytest
 from ros_helpers import running_node, serving
 from rosbags.highlevel import AnyReader
@@ -32,9 +34,11 @@ import yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 NAMESPACE = '/line1'
+CONFIGURED_PCT = 20.0  # the feeder's speed_reference parameter; the topic sends REFERENCE_PCT
 DEVICES = {  # config/mixed_bus.yaml's devices, polled faster
     'crusher': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 10.0},
-    'feeder': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 10.0},
+    'feeder': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 10.0,
+               'speed_reference': CONFIGURED_PCT},
 }
 LATCHED_TOPICS = [f'{NAMESPACE}/{name}/{topic}' for name in DEVICES for topic in ('state', 'trip')]
 STARTER_TOPICS = ('state', 'trip', 'status_word', 'motor_current', 'trip_code',
@@ -237,14 +241,26 @@ def test_mcap_reader_reads_the_storage_file(recording):
     assert decoded == metadata['message_count']
 
 
-def test_plot_of_the_recording(recording, tmp_path):
-    series = read_recording(recording.path)
+def test_the_bag_keeps_the_reference_configured_at_the_start(recording):
+    custom = _metadata(recording.path)['custom_data']
+    assert json.loads(custom[REFERENCE_AT_START]) == {
+        f'{NAMESPACE}/feeder/speed_reference': CONFIGURED_PCT}
+
+
+def test_plot_of_the_recording(recording, tmp_path, capsys):
+    bag = read_recording(recording.path)
+    series = bag.series
     assert sorted(series) == ['line1/crusher', 'line1/feeder']
     assert panels_of(series['line1/crusher']) == ['state', 'motor_current', 'motor_temperature']
     assert panels_of(series['line1/feeder']) == ['state', 'motor_current', 'motor_temperature',
                                                  'speed']
+    assert series['line1/feeder']['speed_reference'][0] == (0.0, CONFIGURED_PCT)
+    assert [value for _, value in series['line1/feeder']['speed_reference']] == \
+        [CONFIGURED_PCT, REFERENCE_PCT]
     png = tmp_path / 'run.png'
     assert plot_main([recording.path, str(png), '--title', 'line 1']) == 0
+    assert capsys.readouterr().out == f'drive_bridge_plot: wrote {png} (line1/crusher, ' \
+        f'line1/feeder; recorded {bag.started()})\n'
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 10_000
 
 
@@ -292,6 +308,30 @@ def test_recorder_class_in_process(line, tmp_path):
     counts = {entry['topic_metadata']['name']: entry['message_count']
               for entry in metadata['topics_with_message_count']}
     assert counts == recorder.counts and counts['/line1/crusher/state'] == 1
+
+
+def test_a_reference_without_its_bridge_is_recorded_without_start_value(line, tmp_path):
+    from std_msgs.msg import Float32
+    publisher = line.node.create_publisher(Float32, '/line9/feeder/speed_reference', 10)
+    try:
+        path = str(tmp_path / 'no_bridge')
+        returncode, stderr = run_recorder(['/line9/feeder/speed_reference', '--wait', '2',
+                                           '--duration', '0.5', '-o', path])
+    finally:
+        line.node.destroy_publisher(publisher)
+    assert returncode == 0, stderr
+    assert 'drive_bridge_record: no answer from /line9/drive_bridge about '\
+        'feeder.speed_reference: the bag has no reference at the start\n' in stderr
+    assert not _metadata(path).get('custom_data')
+
+
+def test_without_rosbags_it_is_one_line_and_exit_2(tmp_path):
+    output = tmp_path / 'never'
+    result = run_without(['rosbags'], 'drive_bridge_record', ['--all', '-o', str(output)])
+    assert (result.returncode, result.stderr, result.stdout) == (
+        2, "drive_bridge_record needs rosbags: pip install 'drive_bridge[recording]' "
+        '(apt/rosdep: python3-rosbags-pip)\n', '')
+    assert not output.exists()
 
 
 @pytest.mark.parametrize('args, reason', [

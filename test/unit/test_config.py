@@ -139,3 +139,39 @@ def test_aggregator_config_groups_every_drive_bridge_status():
     for name in (status_name('/drive_bridge', 'feeder'),
                  status_name('/line1/drive_bridge', 'feeder')):
         assert any(part in name for part in group['contains'])
+
+
+# -- names the node refuses (drive-bridge --config refuses them the same way) ---------------
+NODE_BLOCK = {'port': '/dev/ttyUSB0', 'parity': 'E', 'autostart': False,
+              'use_sim_time': False, 'devices': ['starter', 'drive'],
+              'starter': dict(GOOD_DEVICE),
+              'drive.family': 'fc', 'drive.address': 1, 'drive.comms_timeout': 1.0,
+              'qos_overrides': {'/diagnostics': {'publisher': {'depth': 5}}}}
+
+
+def test_a_node_block_with_only_names_the_node_declares_passes():
+    config.check_parameters_block(NODE_BLOCK)  # nested and flat device blocks, rclpy's own
+
+
+@pytest.mark.parametrize('key, value, message', [
+    ('baud_rate', 9600, "unknown parameter 'baud_rate': known bus parameters are protocol, "),
+    ('starter.pollrate', 5.0, "unknown parameter 'starter.pollrate': a mcd device takes "),
+    ('starter.comms_timeout', 1.0, "parameter 'starter.comms_timeout' applies to families fc, "
+     'vlt only'),
+    ('ap_nak_retries', 3, "parameter 'ap_nak_retries' applies to protocol ap_ascii only, not "
+     'modbus_rtu'),
+    ('other.family', 'mcd', "parameter 'other.family': 'other' is not a listed device "
+     '(devices: starter, drive)'),
+    ('drive.family', 'nope', "parameter 'drive.family' = 'nope' is invalid: allowed "),
+    ('protocol', 'modbus', "parameter 'protocol' = 'modbus' is invalid: allowed "),
+])
+def test_a_node_block_is_refused_for_the_first_name_the_node_refuses(key, value, message):
+    with pytest.raises(ConfigError) as raised:
+        config.check_parameters_block(dict(NODE_BLOCK, **{key: value}))
+    assert str(raised.value).startswith(message), raised.value
+
+
+def test_the_node_declares_the_names_the_check_takes():
+    declared = config.declared_parameters('modbus_rtu', {'drive': 'fc'})
+    assert {'baudrate', 'autostart', 'use_sim_time', 'drive.comms_timeout'} <= declared
+    assert not {'ap_nak_retries', 'address_format', 'drive.start_time'} & declared

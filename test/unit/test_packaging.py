@@ -12,7 +12,7 @@ import drive_bridge
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 COMMANDS = {'drive_bridge_node', 'drive_bridge_sim', 'drive-bridge', 'drive_bridge_plot',
-            'drive_bridge_record'}
+            'drive_bridge_record', 'drive_bridge_ctl'}
 
 
 def _package_xml() -> ElementTree.Element:
@@ -74,6 +74,18 @@ def test_package_xml_names_what_colcon_test_needs():
     assert 'timeout = 120' in _read('setup.cfg')
     for tier in ('unit', 'integration', 'ros'):
         assert re.search(rf'^\s*{tier}: ', config['tool:pytest']['markers'], re.MULTILINE)
+
+
+def test_optional_modules_name_the_extra_and_the_rosdep_key_that_bring_them():
+    from drive_bridge.extras import OPTIONAL
+    exec_depends = {element.text for element in _package_xml().findall('exec_depend')}
+    requirements = metadata.requires('drive_bridge')
+    for module, source in OPTIONAL.items():
+        assert source.rosdep_key in exec_depends, module
+        assert any(re.fullmatch(rf'{module}\b[^;]*; extra == "{source.extra}"', requirement)
+                   for requirement in requirements), module
+    assert 'python3-yaml' in exec_depends  # imported by config.py and drive_bridge_plot
+    assert any(re.fullmatch(r'PyYAML\b[^;]*', requirement) for requirement in requirements)
 
 
 def test_console_scripts_go_where_ros2_run_finds_them():

@@ -1,0 +1,126 @@
+"""
+The bridge node as ``drive_bridge_ctl`` finds it in the ROS graph, with bounded waits.
+
+Every wait spins the command's own node, so discovery and answers are taken as they come,
+and ends early when SIGINT or SIGTERM came (:class:`Interrupted`). The node must appear
+within ``--timeout``; once it is there, a service or topic of it that is not in the graph
+within :data:`GRACE_S` more does not exist (its entities are discovered together with it),
+and one that is there gets ``--timeout`` to match the command's own client or publisher.
+"""
+
+import os
+import threading
+import time
+from typing import Callable, Dict, List
+
+from drive_bridge.ros.ctl_values import BadInput, BRIDGE_NODE, Refused
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node, NodeNameNonExistentError
+from rclpy.task import Future
+
+GRACE_S = 2.0
+SPIN_STEP_S = 0.05
+
+
+class Interrupted(Exception):
+    """SIGINT or SIGTERM came while waiting; the message says what may have happened."""
+
+
+class BridgeSession:
+    """The command's node, the bridge node it talks to, and the waits between them."""
+
+    def __init__(self, node: Node, namespace: str, name: str, timeout_s: float,
+                 stop: threading.Event):
+        self.node = node
+        self.namespace = namespace
+        self.name = name
+        self.full_name = f'{namespace.rstrip("/")}/{name}'
+        self.timeout_s = timeout_s
+        self.stop = stop
+        self._seen_at = 0.0
+        self._executor = SingleThreadedExecutor(context=node.context)
+        self._executor.add_node(node)
+
+    def close(self) -> None:
+        """Let go of the executor (the caller destroys the node)."""
+        self._executor.shutdown(timeout_sec=1.0)
+
+    def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        """Spin until ``predicate`` holds or ``timeout_s`` passed; return the predicate."""
+        deadline = time.monotonic() + timeout_s
+        while not predicate():
+            if self.stop.is_set():
+                raise Interrupted()
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return bool(predicate())
+            self._executor.spin_once(timeout_sec=min(SPIN_STEP_S, remaining))
+        return True
+
+    def find_node(self) -> None:
+        """Wait up to ``--timeout`` for the bridge node; raise BadInput if it is not there."""
+        if self._seen_at:
+            return
+        if not self.spin_until(self._node_present, self.timeout_s):
+            others = sorted(f'{space.rstrip("/")}/{name}' for name, space in
+                            self.node.get_node_names_and_namespaces() if name == BRIDGE_NODE)
+            domain = os.environ.get('ROS_DOMAIN_ID') or '0'
+            hint = f'ROS_DOMAIN_ID {domain} has {", ".join(others)}: choose with --node' \
+                if others else f'is the bridge running, in ROS_DOMAIN_ID {domain} and this ' \
+                'namespace?'
+            raise BadInput(f'no node {self.full_name} within {self.timeout_s:g} s ({hint})')
+        self._seen_at = time.monotonic()
+
+    def _node_present(self) -> bool:
+        return (self.name, self.namespace) in self.node.get_node_names_and_namespaces()
+
+    def wait_for(self, ready: Callable[[], bool], listed: Callable[[], bool]) -> bool:
+        """
+        Find the node, then wait for ``ready`` (an entity of the node matched to ours).
+
+        An entity that is not even ``listed`` in the node's graph GRACE_S after the node
+        appeared does not exist (False); one that is listed gets ``--timeout`` to match.
+        """
+        self.find_node()
+        grace_s = max(0.0, self._seen_at + GRACE_S - time.monotonic())
+        self.spin_until(lambda: ready() or listed(), grace_s)
+        return ready() or (listed() and self.spin_until(ready, self.timeout_s))
+
+    def answer(self, future: Future, what: str, hint: str = '') -> object:
+        """Return the result of ``future``; raise Refused if none within ``--timeout``."""
+        if not self.spin_until(future.done, self.timeout_s):
+            raise Refused(f'no answer from {what} within {self.timeout_s:g} s{hint}')
+        return future.result()
+
+    # -- the bridge node's graph ---------------------------------------------------------
+    def services(self) -> Dict[str, List[str]]:
+        """Return service -> types of the bridge node ({} if it is gone)."""
+        return self._query(self.node.get_service_names_and_types_by_node)
+
+    def publications(self) -> Dict[str, List[str]]:
+        """Return topic -> types the bridge node publishes."""
+        return self._query(self.node.get_publisher_names_and_types_by_node)
+
+    def subscriptions(self) -> Dict[str, List[str]]:
+        """Return topic -> types the bridge node subscribes to."""
+        return self._query(self.node.get_subscriber_names_and_types_by_node)
+
+    def _query(self, query) -> Dict[str, List[str]]:
+        try:
+            return dict(query(self.name, self.namespace))
+        except NodeNameNonExistentError:
+            return {}
+
+    def relative(self, names: List[str], suffix: str) -> List[str]:
+        """Return the names ending in ``suffix``, relative to the namespace, without it."""
+        prefix = self.namespace.rstrip('/') + '/'
+        return sorted(name[len(prefix):len(name) - len(suffix)] for name in names
+                      if name.startswith(prefix) and name.endswith(suffix))
+
+    def devices(self) -> List[str]:
+        """Return the device names of the bridge node (from its ``<name>/state`` topics)."""
+        return self.relative(list(self.publications()), '/state')
+
+    def listing(self, names: List[str]) -> str:
+        """Return names for a message: ``a, b`` or ``none``."""
+        return ', '.join(names) if names else 'none'
