@@ -32,9 +32,9 @@ try:  # the command references; drive_bridge_docs stands in with --help without 
 except ImportError:
     pass
 
-# drive_bridge_record's parser sits beside its rclpy code: import it with the ROS modules that
-# are not installed mocked (a docs build needs no ROS), as rosdoc2 mocks the missing
-# exec_depends for autodoc.
+# The parsers of drive_bridge_record and drive_bridge_ctl sit beside their rclpy code: import
+# them with the ROS modules that are not installed mocked (a docs build needs no ROS), as
+# rosdoc2 mocks the missing exec_depends for autodoc.
 ROS_MODULES = ('rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'sensor_msgs',
                'diagnostic_msgs', 'lifecycle_msgs', 'ament_index_python', 'rosbags')
 
@@ -50,7 +50,8 @@ def _missing(name: str) -> bool:
 from sphinx.ext.autodoc.mock import mock  # noqa: E402 - Sphinx is there when this runs
 
 with mock([name for name in ROS_MODULES if _missing(name)]):
-    importlib.import_module('drive_bridge.ros.record')
+    for module in ('drive_bridge.ros.record', 'drive_bridge.ros.ctl'):
+        importlib.import_module(module)
 
 source_suffix = {'.md': 'markdown'}
 root_doc = 'index'

@@ -79,7 +79,8 @@ def test_the_readme_is_a_front_page_that_links_into_the_manual():
 
 
 def test_every_tool_example_is_marked_for_a_test_that_runs_it():
-    tools = ('drive-bridge ', 'drive_bridge_sim ', 'drive_bridge_record ', 'drive_bridge_plot ')
+    tools = ('drive-bridge ', 'drive_bridge_sim ', 'drive_bridge_record ', 'drive_bridge_plot ',
+             'drive_bridge_ctl ')
     unmarked = [block.where for block in all_blocks()
                 if any(command.startswith(tools) for command, _ in block.commands())
                 and not block.marker]
