@@ -5,7 +5,7 @@ Runs the simulators (an MCD 500 and an FC 51 on one pty), the node in the namesp
 with the devices of config/mixed_bus.yaml, and ``drive_bridge_record --all``, then drives a
 soft start and stop of the crusher and a ramp of the feeder to 80 %, reverse to -40 % and
 stop. Writes the bag and two PNGs to ``build/record_plots/`` (or ``--output DIR``);
-``--update-docs`` writes the PNGs into ``docs/``, where the README shows them. Run through
+``--update-docs`` writes the PNGs into ``docs/``, where the manual shows them. Run through
 ``scripts/record_plots.sh``, which sets up the venv and the environment.
 """
 
@@ -36,7 +36,7 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     parser.add_argument('--output', default=DEFAULT_OUTPUT,
                         help='directory for the bag and the PNGs (default build/record_plots)')
     parser.add_argument('--update-docs', action='store_true',
-                        help="write the PNGs into docs/ (the README's figures)")
+                        help="write the PNGs into docs/ (the manual's figures)")
     args = parser.parse_args(argv)
     args.bag = os.path.join(args.output, time.strftime('run_%Y%m%d-%H%M%S'))
     args.plot_dir = DOCS if args.update_docs else args.output

@@ -32,8 +32,8 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
     Setting('tcp_port', int, 502, 'gateway TCP port', low=1, high=65535),
     Setting('baudrate', int, 9600, 'serial baud rate', choices=BAUDRATES),
     Setting('parity', str, 'E', 'serial parity (quote "N" in YAML)', choices=PARITIES),
-    Setting('stopbits', int, 0, '0 = Modbus standard: 2 with no parity, 1 with parity',
-            choices=(0, 1, 2)),
+    Setting('stopbits', int, 0, "0 = the protocol's standard: Modbus RTU 2 with no parity, 1 "
+            'with parity; FC protocol and AP ASCII 1', choices=(0, 1, 2)),
     Setting('timeout', float, 0.5, 'seconds per transaction', low=0.02, high=10.0),
     Setting('retries', int, 2, 'retries of a read (commands are never repeated)',
             low=0, high=10),
@@ -45,7 +45,8 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
             'longest pause in seconds between probes of an offline device or link',
             low=0.5, high=600.0),
     Setting('frame_gap', float, 0.0,
-            'pause in seconds between transactions; 0 = 3.5 characters on serial lines',
+            "pause in seconds between transactions; 0 = the protocol's own: 3.5 characters "
+            'on Modbus RTU and AP ASCII, 2 on the FC protocol, none on TCP',
             low=0.0, high=1.0),
     Setting('local_echo', bool, False, 'the RS-485 adapter echoes what it sends'),
     Setting('diagnostics_period', float, 1.0, 'seconds between /diagnostics messages',
@@ -78,14 +79,19 @@ PROFILE_SETTINGS: Tuple[Setting, ...] = (
             '(status, current, speed) are read every poll; 0 = every poll',
             low=0.0, high=3600.0),
 )
-# Families that take a speed reference (drives) take these too.
-REFERENCE_SETTINGS: Tuple[Setting, ...] = (
-    Setting('speed_reference', float, 0.0, 'drives: percent, FC scaling',
+# Families that take a speed reference (drives) take these too: the reference and its
+# deadman, and the ros2_control joint settings (~/joint_states, ~/joint_commands: see
+# drive_bridge.ros.joints).
+SPEED_REFERENCE_SETTINGS: Tuple[Setting, ...] = (
+    Setting('speed_reference', float, 0.0,
+            'drives: the bus speed reference in percent (FC scaling, 0x4000 = 100 %; negative '
+            '= reverse); it goes out with the next process-data write',
             low=-200.0, high=200.0, high_open=True, runtime=True),
     Setting('reference_timeout', float, 0.0,
             'drives: seconds without a speed_reference message before a ramp stop; 0 = off',
             low=0.0, high=3600.0, runtime=True),
-    # ros2_control (~/joint_states, ~/joint_commands): see drive_bridge.ros.joints.
+)
+JOINT_SETTINGS: Tuple[Setting, ...] = (
     Setting('velocity_scale', float, 0.0,
             'drives: rad/s of the joint at 100 % reference (negative: the joint turns the '
             'other way); 0 = not a joint', low=-10000.0, high=10000.0),
@@ -100,7 +106,9 @@ REFERENCE_SETTINGS: Tuple[Setting, ...] = (
             'drives: seconds a zero joint command is held before command_mode auto_start '
             'ramp-stops the drive', low=0.0, high=3600.0, runtime=True),
 )
-# The node's own settings (not the bus's): a parameters file may hold them.
+REFERENCE_SETTINGS: Tuple[Setting, ...] = SPEED_REFERENCE_SETTINGS + JOINT_SETTINGS
+# The node's own settings (not the bus's): a parameters file may hold them; declared by
+# drive_bridge.ros.node.
 NODE_SETTINGS: Tuple[Setting, ...] = (
     Setting('autostart', bool, True,
             'walk the lifecycle to active at start (false: wait for configure and activate)'),

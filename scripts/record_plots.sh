@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Record a simulated soft start and FC 51 ramp through the node with drive_bridge_record and
 # plot them into build/record_plots/ (options: --output DIR; --update-docs writes the
-# README's figures in docs/ instead).
+# manual's figures in docs/ instead).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 VENV="$root/.venv"

@@ -13,7 +13,7 @@ on the wire between two transactions of a poll, never later than the one on the 
 it arrived: the next step is chosen only :data:`CHOICE_LEAD_S` before the inter-frame gap
 ends, so a command that comes in the gap goes first. Commands carry a deadline and are
 never repeated; the motor-state owner decides what may be sent (see :mod:`.motor` and the
-README's "Safety model").
+the manual's safety model, docs/safety.md).
 
 :meth:`run_once` has no waiting of its own (it returns how long to wait), so unit tests
 drive it with a fake clock and a fake transport; :meth:`start` runs it on a thread.

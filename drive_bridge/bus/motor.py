@@ -9,7 +9,7 @@ Every command for a device passes through its :class:`MotorOwner`, which alone d
 - whether a motor may be running because of this bridge (``motion``), which stop-on-shutdown,
   deactivate, the deadman and /diagnostics follow.
 
-The invariants it holds (README, "Safety model"):
+The invariants it holds (the manual's safety model, docs/safety.md):
 
 1. Nothing that could start a motor is written unless a start a user asked for is in force:
    the run image is carried only after a start was acknowledged, and is dropped on a trip, on

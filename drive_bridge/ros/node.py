@@ -75,14 +75,14 @@ class _PendingCall:
 
 
 class DriveBridgeNode(LifecycleNode):
-    """One bus owner; see the module docstring and the README."""
+    """One bus owner; see the module docstring and the manual (docs/ros_api.md)."""
 
     def __init__(self, **kwargs: Any):
         super().__init__(NODE_NAME, **kwargs)
         self._log_handler = logs.attach(self.get_logger())  # the transports' notes
         self._guard_change_state()
         node_values = {setting.name: self._declare(setting, setting.name)
-                       for setting in NODE_SETTINGS}
+                       for setting in cfg.NODE_SETTINGS}
         self.autostart = bool(node_values['autostart'])
         self.allow_runtime_control_enable = bool(node_values['allow_runtime_control_enable'])
         self.config: Optional[cfg.BridgeConfig] = None
@@ -635,8 +635,9 @@ def main(args: Optional[List[str]] = None) -> int:
 USAGE = """usage: drive_bridge_node [--ros-args --params-file FILE [-r __ns:=/line1] ...]
 
 The drive_bridge node: one RS-485 bus (or Modbus gateway) with its soft starters and drives,
-as ROS 2 topics, services and parameters. Settings come from a ROS 2 parameters file; see the
-README and config/*.yaml. Exit status: 0 after a signal, 2 on a configuration error."""
+as ROS 2 topics, services and parameters. Settings come from a ROS 2 parameters file; see
+docs/configuration.md and config/*.yaml. Exit status: 0 after a signal, 2 on a configuration
+error."""
 
 
 if __name__ == '__main__':

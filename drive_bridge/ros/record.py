@@ -51,8 +51,8 @@ class BadInput(Exception):
     """An argument or the ROS graph does not allow a recording (exit status 2)."""
 
 
-def parse_args(argv: List[str]) -> argparse.Namespace:
-    """Parse and check the command line; raise BadInput with one line."""
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser (its arguments are checked by :func:`parse_args`)."""
     parser = argparse.ArgumentParser(
         prog=PROG, description=__doc__.split('\n\n')[1].strip().replace('``', ''))
     parser.add_argument('topics', nargs='*', help='topics to record (relative: in --namespace)')
@@ -66,7 +66,12 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
                         'Ctrl-C)')
     parser.add_argument('--wait', type=float, default=10.0,
                         help='seconds to wait for the topics to appear (default 10)')
-    args = parser.parse_args(argv)
+    return parser
+
+
+def parse_args(argv: List[str]) -> argparse.Namespace:
+    """Parse and check the command line; raise BadInput with one line."""
+    args = build_parser().parse_args(argv)
     if bool(args.topics) == args.all:
         raise BadInput('name the topics to record, or --all (not both)')
     for name, value in (('--duration', args.duration), ('--wait', args.wait)):

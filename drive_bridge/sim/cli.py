@@ -262,6 +262,9 @@ def _describe(unit: int, device, now: float) -> str:
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the simulator until SIGINT/SIGTERM or ``quit``."""
     args = build_parser().parse_args(argv)
+    done = threading.Event()  # set by a signal from now on: before 'ready' is printed
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    signal.signal(signal.SIGINT, lambda *_: done.set())
     pacer = _pacer(args)
     server = build_server(args)
     if not args.no_pty:
@@ -281,9 +284,6 @@ def main(argv: Optional[List[str]] = None) -> int:
     served = [f'{m}@{u}' for m, u in args.device] + \
         [f'{m} in {i} out {o} ({kind})' for i, (m, o, kind) in args.lvsg]
     print('ready: ' + ', '.join(served), flush=True)
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    signal.signal(signal.SIGINT, lambda *_: done.set())
     console = sys.stdin.isatty() if args.console is None else args.console
     if console:
         threading.Thread(target=_read_console, args=(server, done), daemon=True).start()

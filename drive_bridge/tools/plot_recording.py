@@ -233,16 +233,21 @@ def _draw_values(axis, field: str, samples: Samples, end_s: float) -> None:
         axis.plot(times, values, color=colour, label=label)
 
 
-def main(argv: Optional[List[str]] = None) -> int:
-    """Plot a recording; exit 2 with one line on a bad bag, device name or output path."""
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser."""
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split(
         '\n\n')[1].split('. ')[0].replace('``', '') + '.')
     parser.add_argument('recording', help='bag directory (or a file in it)')
     parser.add_argument('output', help='PNG file to write')
     parser.add_argument('--device', action='append',
                         help='only this device (repeatable; e.g. crusher or line1/crusher)')
-    parser.add_argument('--title', default='')
-    args = parser.parse_args(argv)
+    parser.add_argument('--title', default='', help='title above the plot')
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Plot a recording; exit 2 with one line on a bad bag, device name or output path."""
+    args = build_parser().parse_args(argv)
     try:
         require(PROG, 'rosbags', 'matplotlib')
         check_output(args.output)

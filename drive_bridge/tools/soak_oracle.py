@@ -8,7 +8,7 @@ references, and what the bridge reported about a device: offline, online, trippe
 of the bridge's own state is read. Every record carries the *line sequence* at the moment it
 happened (how many requests the line had carried), so the two records fall into one order.
 
-The invariants (the README's safety model):
+The invariants (the manual's safety model, docs/safety.md):
 
 1. Nothing that could start a motor reaches a device unless a start the client asked for is
    in force. Every start or run write a device executed is explained by a start the client

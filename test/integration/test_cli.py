@@ -28,11 +28,9 @@ from drive_bridge.tools.cli_target import make_bus
 import pytest
 import yaml
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 LINE = {1: 'fc51', 5: 'vlt5000', 6: 'vlt6000', 20: 'mcd500', 21: 'mcd3000'}
 FC51 = ['--family', 'fc', '--address', 1]
 MCD500 = ['--family', 'mcd', '--address', 20]
-README_LINE = {1: 'fc51', 5: 'vlt5000', 6: 'vlt6000', 20: 'mcd500'}  # as the README says
 WRITE_FUNCTIONS = (rtu.WRITE_SINGLE_COIL, rtu.WRITE_SINGLE_REGISTER, rtu.WRITE_MULTIPLE_COILS,
                    rtu.WRITE_MULTIPLE_REGISTERS)
 
@@ -964,49 +962,3 @@ def test_progress_goes_to_stderr_only_on_a_terminal(line, tmp_path):
                         text=True)
     out, error = piped.communicate(timeout=60)
     assert piped.returncode == 0 and error == '' and out.endswith('and verified\n')
-
-
-# -- the README's examples ------------------------------------------------------------------
-def readme_examples():
-    """Return (command line, expected output lines) of the README's drive-bridge block."""
-    with open(os.path.join(ROOT, 'README.md')) as stream:
-        text = stream.read()
-    section = text.split('### Commissioning from a terminal: `drive-bridge`', 1)[1]
-    block = section.split('```bash\n', 1)[1].split('```', 1)[0]
-    examples = []
-    for row in block.splitlines():
-        if row.startswith('drive-bridge '):
-            examples.append((row, []))
-        elif row.startswith('#   '):
-            examples[-1][1].append(row[len('#   '):])
-    return examples
-
-
-def test_every_readme_example_runs_as_written_against_the_simulator(tmp_path, monkeypatch):
-    # On the simulator's pty, as a user runs them: the example's parity E, run after run.
-    examples = readme_examples()
-    assert {shlex.split(command)[1] for command, _ in examples} >= \
-        {'scan', 'status', 'get', 'set', 'backup', 'restore', 'monitor'}
-    server = make_sim_server(README_LINE)
-    port = server.open_pty()
-    server.start()
-    try:
-        (tmp_path / 'config').mkdir()
-        with open(os.path.join(ROOT, 'config', 'mixed_bus.yaml')) as stream:
-            (tmp_path / 'config' / 'mixed_bus.yaml').write_text(
-                stream.read().replace('/dev/ttyUSB0', port))
-        monkeypatch.chdir(tmp_path)
-        for command, expected in examples:
-            argv = shlex.split(command.replace('/dev/ttyUSB0', port), comments=True)[1:]
-            code, out = run(*argv, '--quiet')
-            assert code == 0, command
-            for wanted in expected:
-                assert wanted in out, f'{command}\n  printed:\n{out}\n  README: {wanted}'
-    finally:
-        server.stop()
-    assert model_of(server, 1).parameters[341] == 425
-    assert model_of(server, 6).parameters[533] == '1234567890'
-
-
-def model_of(server, unit):
-    return server.devices[unit].model

@@ -1,0 +1,99 @@
+"""
+The manual and the README against the code and themselves.
+
+The reference covers every setting, links resolve, examples are marked for the tests that
+run them, and the README stays a front page. The configuration reference itself is built
+from the declarations by the docs build (docs/_ext); this checks what the build alone does
+not: that its groups hold every declared setting, and that a page shows each group (the
+build checks that too, with Sphinx).
+"""
+
+import os
+import re
+
+from docs_helpers import all_blocks, DOCS, pages, parameter_reference, ROOT
+from drive_bridge import config
+import pytest
+
+README_MAX_LINES = 250
+LINK = re.compile(r'(?<!!)\[[^\]]*\]\(([^)\s]+)\)')
+IMAGE = re.compile(r'!\[[^\]]*\]\(([^)\s]+)\)')
+DIRECTIVE = re.compile(r'^```\{settings-table\} (\S+)', re.MULTILINE)
+
+
+def test_the_reference_holds_every_declared_setting_and_nothing_else():
+    names = parameter_reference().reference_names()
+    declared_bus = {s.name for s in config.BUS_SETTINGS + config.NODE_SETTINGS}
+    assert names['bus'] == declared_bus
+    assert names['device'] == set(config.all_device_settings())
+
+
+def test_every_group_of_the_reference_is_shown_on_a_page():
+    shown = set()
+    for page in pages():
+        with open(page, encoding='utf-8') as stream:
+            shown.update(DIRECTIVE.findall(stream.read()))
+    keys = {group.key for group in parameter_reference().groups()}
+    assert keys - shown == set(), 'groups no page shows'
+    assert shown - keys == set(), 'pages show groups that do not exist'
+
+
+def headings(path: str) -> set:
+    """Return the anchors of a Markdown file's headings, as GitHub and MyST make them."""
+    anchors = set()
+    with open(path, encoding='utf-8') as stream:
+        text = re.sub(r'```.*?```', '', stream.read(), flags=re.DOTALL)
+    for title in re.findall(r'^#{1,6} (.+)$', text, re.MULTILINE):
+        slug = re.sub(r'[^\w\- ]', '', title.strip().lower()).replace(' ', '-')
+        anchors.add(slug)
+    return anchors
+
+
+def local_links(page: str) -> list:
+    with open(page, encoding='utf-8') as stream:
+        text = re.sub(r'```.*?```', '', stream.read(), flags=re.DOTALL)
+    targets = LINK.findall(text) + IMAGE.findall(text)
+    return [target for target in targets if '://' not in target and
+            not target.startswith('mailto:')]
+
+
+@pytest.mark.parametrize('page', pages(), ids=lambda page: os.path.relpath(page, ROOT))
+def test_every_link_names_a_file_and_heading_that_exist(page):
+    for target in local_links(page):
+        path, _, anchor = target.partition('#')
+        path = os.path.normpath(os.path.join(os.path.dirname(page), path)) if path else page
+        assert os.path.exists(path), f'{os.path.relpath(page, ROOT)}: {target}: no such file'
+        if anchor and path.endswith('.md'):
+            assert anchor in headings(path), \
+                f'{os.path.relpath(page, ROOT)}: {target}: no such heading'
+
+
+def test_the_readme_is_a_front_page_that_links_into_the_manual():
+    with open(os.path.join(ROOT, 'README.md'), encoding='utf-8') as stream:
+        text = stream.read()
+    assert len(text.splitlines()) <= README_MAX_LINES
+    linked = {os.path.normpath(target.partition('#')[0]) for target in
+              local_links(os.path.join(ROOT, 'README.md'))}
+    for page in ('quickstart', 'install', 'configuration', 'safety', 'contributing'):
+        assert os.path.join('docs', f'{page}.md') in linked, page
+
+
+def test_every_tool_example_is_marked_for_a_test_that_runs_it():
+    tools = ('drive-bridge ', 'drive_bridge_sim ', 'drive_bridge_record ', 'drive_bridge_plot ',
+             'drive_bridge_ctl ')
+    unmarked = [block.where for block in all_blocks()
+                if any(command.startswith(tools) for command, _ in block.commands())
+                and not block.marker]
+    assert unmarked == []
+
+
+def test_every_page_is_in_the_table_of_contents():
+    listed = set()
+    for page in pages():
+        with open(page, encoding='utf-8') as stream:
+            text = stream.read()
+        for toctree in re.findall(r'```\{toctree\}\n(.*?)```', text, re.DOTALL):
+            listed.update(row.strip() for row in toctree.splitlines()
+                          if row.strip() and not row.startswith(':'))
+    names = {os.path.basename(page)[:-3] for page in pages() if page.startswith(DOCS)}
+    assert names - listed == {'index'}
