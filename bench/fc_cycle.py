@@ -16,6 +16,7 @@ Run: .venv/bin/python bench/fc_cycle.py [seconds per case]
 import sys
 import time
 
+from drive_bridge.bus.events import ReadingEvent
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices import fc
 from drive_bridge.devices.contracts import SlowReadouts
@@ -46,7 +47,7 @@ def make_bus(line: PacedSimulator, protocol: str, engine: str, readings: list) -
     return BusMaster(make_transport(settings, options),
                      [DeviceSpec('conv', 1, profile, poll_rate_hz=100.0)],
                      BusTiming(frame_gap_s=line.timing.gap_s),  # the 8E1 gap, not 8N1's
-                     listener=lambda event: readings.append(event.kind == 'reading'))
+                     listener=lambda event: readings.append(isinstance(event, ReadingEvent)))
 
 
 def bench(baudrate: int, seconds: float, protocol: str, engine: str = '') -> dict:

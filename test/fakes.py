@@ -2,6 +2,13 @@
 
 import os
 
+from drive_bridge.bus.events import (
+    DeviceOffline, DeviceOnline, Notice, ReadingEvent, StateUnknown)
+
+# The bus event types in the words the tests were written in.
+EVENT_KINDS = {ReadingEvent: 'reading', DeviceOnline: 'online', DeviceOffline: 'offline',
+               StateUnknown: 'error', Notice: 'notice'}
+
 
 class FakeClock:
     """Monotonic time that moves only when told to (or when the bus sleeps)."""
@@ -14,6 +21,16 @@ class FakeClock:
 
     def sleep(self, seconds):
         self.now += seconds
+
+
+def kind(event):
+    """Return a bus event's kind in words: 'reading', 'online', 'offline', 'error', 'notice'."""
+    return EVENT_KINDS[type(event)]
+
+
+def message(event):
+    """Return the text a bus event carries ('' for a reading)."""
+    return getattr(event, 'message', '')
 
 
 def run_for(bus, clock, seconds):

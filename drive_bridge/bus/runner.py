@@ -14,9 +14,12 @@ from typing import Any, Callable, Optional
 from drive_bridge.bus.device import BusDevice
 from drive_bridge.devices.contracts import DeviceReading, PollCycle, PollStep
 from drive_bridge.errors import (
-    BadFrame, DeviceException, LinkDown, MonitorOnly, NoResponse, TransportError)
+    BadFrame, DeviceException, LinkDown, MonitorOnly, NoResponse, ProtocolError, TransportError)
 from drive_bridge.protocol.requests import Request
 from drive_bridge.transport.base import Transport
+
+# What decoding a reply may raise: the poll (or parameter access) failed, the bus goes on.
+DECODE_ERRORS = (ProtocolError, ValueError, IndexError, KeyError, TypeError)
 
 
 class TransactionRunner:
@@ -32,6 +35,11 @@ class TransactionRunner:
         self.sleep = sleep
         self.last_end_s = -float('inf')
         self.in_flight_s = 0.0  # the bus's own work while the last request was on the wire
+
+    @property
+    def reports_request_sent(self) -> bool:
+        """Return whether the transport reports each request as it leaves (see Transport)."""
+        return self.transport.reports_request_sent
 
     def while_in_flight(self, work: Callable[[], None]) -> Callable[[], None]:
         """Return ``work`` timed as work done while a request is on the wire (not its RTT)."""

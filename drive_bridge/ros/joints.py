@@ -40,7 +40,10 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from drive_bridge import config as cfg
-from drive_bridge.bus.master import BusEvent, BusMaster, DeviceSnapshot
+from drive_bridge.bus.events import (
+    BusEvent, DeviceOffline, DeviceOnline, handler_table, ignore, Notice, ReadingEvent,
+    StateUnknown)
+from drive_bridge.bus.master import BusMaster, DeviceSnapshot
 from drive_bridge.errors import CommandRefused, ConfigError
 from drive_bridge.protocol.commands import Command
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -265,19 +268,24 @@ class JointBridge:
                          'malformed': 0}
         self.last_ignored = ''
         self.last_ignored_s = -1e9
+        self.event_handlers = handler_table({
+            ReadingEvent: self._on_reading, DeviceOffline: self._interrupt,
+            StateUnknown: self._interrupt, DeviceOnline: ignore, Notice: ignore})
 
     # -- states (bus thread) ------------------------------------------------------------
     def on_bus_event(self, event: BusEvent) -> None:
         """Publish the joint state of a reading; an outage interrupts the integration."""
         joint = self.joints.get(event.device)
-        if joint is None:
-            return
-        if event.kind in ('offline', 'error'):
-            with self._lock:
-                joint.integrator.interrupt()
-            return
+        if joint is not None:
+            self.event_handlers[type(event)](joint, event)
+
+    def _interrupt(self, joint: _Joint, event: BusEvent) -> None:
+        with self._lock:
+            joint.integrator.interrupt()
+
+    def _on_reading(self, joint: _Joint, event: ReadingEvent) -> None:
         reading = event.reading
-        if event.kind != 'reading' or reading is None or reading.speed_feedback_pct is None:
+        if reading.speed_feedback_pct is None:
             return
         velocity = reading.speed_feedback_pct * joint.spec.velocity_scale / 100.0
         with self._lock:

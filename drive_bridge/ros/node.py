@@ -25,10 +25,12 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 from drive_bridge import config as cfg
-from drive_bridge.bus.master import BusEvent, BusMaster
+from drive_bridge.bus.events import BusEvent
+from drive_bridge.bus.master import BusMaster
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError
 from drive_bridge.protocol.commands import Command
 from drive_bridge.ros import joints, logs
+from drive_bridge.ros.bus_events import publish_event
 from drive_bridge.ros.diagnostics import diagnostic_status, status_name
 from drive_bridge.ros.publishers import DevicePublishers
 from drive_bridge.settings import check_value, Setting
@@ -451,23 +453,11 @@ class DriveBridgeNode(LifecycleNode):
                 if self._joints is not None:
                     self._joints.bridge.on_bus_event(event)
             except Exception as error:  # noqa: B902 - a bug must not kill the bus thread
-                self.get_logger().error(f'cannot publish {event.kind} of {event.device}: '
-                                        f'{type(error).__name__}: {error}')
+                self.get_logger().error(f'cannot publish {type(event).__name__} of '
+                                        f'{event.device}: {type(error).__name__}: {error}')
 
     def _publish_event(self, publishers: DevicePublishers, event: BusEvent) -> None:
-        logger = self.get_logger()
-        if event.kind == 'reading' and event.reading is not None:
-            publishers.publish_reading(event.reading)
-        elif event.kind == 'offline':
-            publishers.publish_state('offline')
-            logger.error(f'{event.device} offline: {event.message}')
-        elif event.kind == 'error':
-            publishers.publish_state('unknown')
-            logger.error(f'{event.device}: {event.message}')
-        elif event.kind == 'notice':
-            logger.warning(f'{event.device}: {event.message}')
-        elif event.kind == 'online':
-            logger.info(f'{event.device} online')
+        publish_event(publishers, self.get_logger(), event)
 
     # -- diagnostics and overdue calls --------------------------------------------------
     def _on_diagnostics_timer(self) -> None:

@@ -23,9 +23,10 @@ import statistics
 import tempfile
 import threading
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Type
 
-from drive_bridge.bus.master import BusEvent, BusMaster
+from drive_bridge.bus.events import BusEvent, DeviceOffline, DeviceOnline
+from drive_bridge.bus.master import BusMaster
 from drive_bridge.config import build_config
 from drive_bridge.sim.devices import make_device, make_sim_server
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
@@ -70,14 +71,14 @@ class EventLog:
             self.events.append((time.monotonic(), event))
             self.condition.notify_all()
 
-    def wait(self, device: str, kind: str, after_s: float, timeout_s: float = 10.0,
+    def wait(self, device: str, kind: Type[BusEvent], after_s: float, timeout_s: float = 10.0,
              check: Callable[[], bool] = lambda: True) -> Optional[float]:
         """Return the time of the first ``kind`` event of ``device`` after ``after_s``."""
         deadline = time.monotonic() + timeout_s
         with self.condition:
             while True:
                 for stamp, event in self.events:
-                    if stamp >= after_s and event.device == device and event.kind == kind \
+                    if stamp >= after_s and event.device == device and type(event) is kind \
                             and check():
                         return stamp
                 remaining = deadline - time.monotonic()
@@ -143,14 +144,14 @@ def _cycles(drill: str, cycles: int, down_s: float, server, master: BusMaster, l
             device: str, report: DrillReport) -> None:
     setup_done = (lambda: _fc_803(server) == round(COMMS_TIMEOUT_S * 10)) \
         if drill != 'tcp' else (lambda: True)
-    if log.wait(device, 'online', 0.0, check=setup_done) is None:
+    if log.wait(device, DeviceOnline, 0.0, check=setup_done) is None:
         report.failures.append('the device never came online')
         return
     tcp_port = server.tcp_port
     for cycle in range(cycles):
         lost_at = time.monotonic()
         _break(drill, server)
-        offline_at = log.wait(device, 'offline', lost_at)
+        offline_at = log.wait(device, DeviceOffline, lost_at)
         if offline_at is None:
             report.failures.append(f'cycle {cycle + 1}: the loss was never reported')
             return
@@ -160,12 +161,12 @@ def _cycles(drill: str, cycles: int, down_s: float, server, master: BusMaster, l
                 server.devices[1].model.parameters[803] = SPOILED_803
         back_at = time.monotonic()
         _repair(drill, server, tcp_port)
-        online_at = log.wait(device, 'online', back_at, check=setup_done)
+        online_at = log.wait(device, DeviceOnline, back_at, check=setup_done)
         if online_at is None:
             report.failures.append(f'cycle {cycle + 1}: no recovery within 10 s')
             return
         if drill != 'tcp' and master.snapshot('pump').online is not True and \
-                log.wait('pump', 'online', back_at) is None:
+                log.wait('pump', DeviceOnline, back_at) is None:
             report.failures.append(f'cycle {cycle + 1}: the other device did not recover')
             return
         report.detect_s.append(offline_at - lost_at)

@@ -29,7 +29,10 @@ import random
 import time
 from typing import Callable, Dict, List, Optional, Tuple
 
-from drive_bridge.bus.master import BusEvent, BusMaster
+from drive_bridge.bus.events import (
+    BusEvent, DeviceOffline, DeviceOnline, handler_table, ignore, Notice, ReadingEvent,
+    StateUnknown)
+from drive_bridge.bus.master import BusMaster
 from drive_bridge.config import BridgeConfig, build_config
 from drive_bridge.errors import CommandRefused
 from drive_bridge.protocol import fc_control
@@ -406,21 +409,26 @@ class _Listener:
         self.tripped_told: Dict[str, bool] = {}
         self.offline: Dict[str, bool] = {}
         self.offline_events = 0
+        self.handlers = handler_table({
+            DeviceOffline: functools.partial(self._link_state, 'offline'),
+            DeviceOnline: functools.partial(self._link_state, 'online'),
+            ReadingEvent: self._reading, StateUnknown: ignore, Notice: ignore})
 
     def __call__(self, event: BusEvent) -> None:
-        log = self.log
-        if log is None:
-            return
-        if event.kind in ('offline', 'online'):
-            log.notice(event.device, event.kind)
-            self.tripped_told[event.device] = False
-            self.offline[event.device] = event.kind == 'offline'
-            self.offline_events += event.kind == 'offline'
-        elif event.kind == 'reading' and event.reading is not None:
-            tripped = event.reading.tripped
-            if tripped and not self.tripped_told.get(event.device):
-                log.notice(event.device, 'tripped')
-            self.tripped_told[event.device] = tripped
+        if self.log is not None:
+            self.handlers[type(event)](event)
+
+    def _link_state(self, state: str, event: BusEvent) -> None:
+        self.log.notice(event.device, state)
+        self.tripped_told[event.device] = False
+        self.offline[event.device] = state == 'offline'
+        self.offline_events += state == 'offline'
+
+    def _reading(self, event: ReadingEvent) -> None:
+        tripped = event.reading.tripped
+        if tripped and not self.tripped_told.get(event.device):
+            self.log.notice(event.device, 'tripped')
+        self.tripped_told[event.device] = tripped
 
 
 # -- the run ------------------------------------------------------------------------------

@@ -22,10 +22,10 @@ import contextlib
 import random
 from typing import Dict, Iterator, Tuple, Type
 
-from drive_bridge.bus.execution import JobRunner
+from drive_bridge.bus.execution import CommandExecutor
 from drive_bridge.bus.jobs import CommandJob
-from drive_bridge.bus.master import BusMaster
 from drive_bridge.bus.motor import MotorOwner
+from drive_bridge.bus.scheduler import BusScheduler
 from drive_bridge.errors import TransportError
 from drive_bridge.protocol.commands import Command
 
@@ -69,11 +69,11 @@ def _offline_keeps_command():
 @contextlib.contextmanager
 def _failed_start_resent():
     resend = []  # starts answered as failed, to be queued again on the bus thread
-    run_command_job = JobRunner._run_command_job
-    run_once = BusMaster.run_once
+    run_command = CommandExecutor.run
+    run_once = BusScheduler.run_once
 
-    def run_command(self, job):
-        run_command_job(self, job)
+    def run_command_keeping_failed_starts(self, job):
+        run_command(self, job)
         error = job.future.exception() if job.future.done() else None
         if isinstance(error, TransportError) and job.command.may_start:
             resend.append(job)  # broken: queued again, behind the caller's back
@@ -81,14 +81,12 @@ def _failed_start_resent():
     def run_once_resending(self):
         while resend:
             job = resend.pop()
-            with self._lock:
-                self._jobs.push(CommandJob(job.device, self.clock() +
-                                           self.timing.command_deadline_s, Future(),
-                                           job.command))
+            self.jobs.push(CommandJob(job.device, self.clock() +
+                                      self.deadman.command_deadline_s, Future(), job.command))
         return run_once(self)
 
-    with _patched(JobRunner, '_run_command_job', run_command), \
-            _patched(BusMaster, 'run_once', run_once_resending):
+    with _patched(CommandExecutor, 'run', run_command_keeping_failed_starts), \
+            _patched(BusScheduler, 'run_once', run_once_resending):
         yield
 
 

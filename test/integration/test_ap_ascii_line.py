@@ -9,6 +9,7 @@ from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.transport.ap_ascii import ApAsciiTransport
 from drive_bridge.transport.link import LinkSettings
+from fakes import kind
 from integration_helpers import wait_until
 import pytest
 
@@ -123,7 +124,7 @@ def test_a_dead_address_does_not_hold_back_the_readings_of_a_live_starter(line):
     delays = []
 
     def listener(event):
-        if event.kind == 'reading':
+        if kind(event) == 'reading':
             delays.append(time.monotonic() - event.stamp_s)
     bus = BusMaster(config.make_transport(), [d.make_spec() for d in config.devices],
                     config.timing, listener=listener).start()

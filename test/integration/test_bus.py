@@ -7,6 +7,7 @@ from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import CommandRefused
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
+from fakes import kind, message
 from integration_helpers import wait_until
 import pytest
 
@@ -26,7 +27,7 @@ def bus(sim_bus):
 
 
 def readings(master, name):
-    return [e.reading for e in list(master.events) if e.device == name and e.kind == 'reading']
+    return [e.reading for e in list(master.events) if e.device == name and kind(e) == 'reading']
 
 
 def test_dead_device_offline_others_polled(bus):
@@ -107,7 +108,7 @@ def test_refused_polls_show_as_such_and_never_as_current_values(bus, sim_bus):
         snapshot.poll_failure
     events = len(bus.events)
     assert wait_until(lambda: bus.snapshot('main').reading is None, 3.0)  # after offline_after
-    unknown = [e for e in bus.events[events:] if e.device == 'main' and e.kind == 'error']
+    unknown = [e for e in bus.events[events:] if e.device == 'main' and kind(e) == 'error']
     assert len(unknown) == 1 and 'poll refused (3 in a row)' in unknown[0].message
     with sim_bus.lock:
         model.local_comms_error = False
@@ -122,7 +123,7 @@ def test_a_single_busy_refusal_is_counted_not_a_change_of_state(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('aux').stats['errors_exception'] == '1', 3.0)
     assert wait_until(lambda: bus.snapshot('aux').poll_failure == '', 3.0)  # the next poll
     assert not [e for e in bus.events[events:] if e.device == 'aux' and
-                e.kind in ('error', 'offline')]
+                kind(e) in ('error', 'offline')]
 
 
 @pytest.mark.parametrize('engine', SERIAL_ENGINES)
@@ -137,8 +138,8 @@ def test_a_bus_restarted_on_a_pty_with_parity_e_is_online_every_time(sim_bus, en
                            BusTiming(backoff_max_s=2.0), listener=events.append)
         master.start()
         try:
-            assert wait_until(lambda: any(e.kind == 'reading' for e in list(events)), 3.0), \
-                [event.message for event in events]
+            assert wait_until(lambda: any(kind(e) == 'reading' for e in list(events)), 3.0), \
+                [message(event) for event in events]
         finally:
             master.shutdown(stop_motors=False)
-        assert not [event.message for event in events if event.kind == 'offline']
+        assert not [event.message for event in events if kind(event) == 'offline']

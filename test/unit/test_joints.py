@@ -8,7 +8,8 @@ are collected instead of published.
 import math
 
 from drive_bridge import config
-from drive_bridge.bus.master import BusEvent, BusMaster, BusTiming
+from drive_bridge.bus.events import ReadingEvent
+from drive_bridge.bus.master import BusMaster, BusTiming
 from drive_bridge.devices.contracts import DeviceReading
 from drive_bridge.errors import ConfigError, NoResponse
 from drive_bridge.protocol import words
@@ -16,7 +17,7 @@ from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.requests import ReadCoils, ReadRegisters, WriteCoils
 from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import LinkSettings
-from fakes import FakeClock, run_for
+from fakes import FakeClock, kind, run_for
 import pytest
 
 # rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
@@ -287,7 +288,7 @@ def test_every_reading_is_one_joint_state_in_si_stamped_on_the_node_clock():
     assert 9 <= len(left) <= 11 and 9 <= len(right) <= 11
     assert {velocity for _, _, velocity in left} == {10.0}
     assert {velocity for _, _, velocity in right} == {-10.0}
-    readings = [e for e in bench.events if e.kind == 'reading' and e.device == 'left']
+    readings = [e for e in bench.events if kind(e) == 'reading' and e.device == 'left']
     assert [stamp for stamp, _, _ in left] == \
         [1_000_000_000_000 + round(e.stamp_s * 1e9) for e in readings]
     first, last = left[0], left[-1]
@@ -449,6 +450,6 @@ def test_stamp_offset_moves_the_bus_clock_onto_the_node_clock():
 
 def test_reading_without_speed_feedback_is_left_out():
     bench = Bench()
-    bench.bridge.on_bus_event(BusEvent('left', 'reading', DeviceReading('ready', READY), '',
-                                       1.0))
+    bench.bridge.on_bus_event(ReadingEvent(device='left', stamp_s=1.0,
+                                           reading=DeviceReading('ready', READY)))
     assert bench.sent == []
