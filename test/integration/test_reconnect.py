@@ -1,6 +1,6 @@
 """Twenty reconnect cycles in a row per drill: unplugged adapter, power cycle, gateway restart."""
 
-from drive_bridge.tools.reconnect import DRILLS, run_drill
+from reconnect_drill import DRILLS, run_drill
 import pytest
 
 
