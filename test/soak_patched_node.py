@@ -8,8 +8,8 @@ of :data:`soak_harness.broken.VARIANTS`. Never run it against real equipment.
 import sys
 
 from drive_bridge.ros import node
-from soak_harness.broken import broken
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
+from soak_harness.broken import broken
 
 
 def main() -> int:
