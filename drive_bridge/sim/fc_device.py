@@ -19,7 +19,8 @@ from typing import Any, Callable, Dict, List, Optional
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.protocol.words import coils_to_words, words_to_coils
-from drive_bridge.sim.fc_model import FcModel, FcSimConfig, ParameterError
+from drive_bridge.sim.fc_model import FcModel, FcSimConfig
+from drive_bridge.sim.fc_parameter_store import ParameterError
 
 ILLEGAL_FUNCTION, ILLEGAL_ADDRESS, ILLEGAL_VALUE, DEVICE_FAILURE = 1, 2, 3, 4
 # The option card's own codes for the same faults ("VLT 6000 Errors").
