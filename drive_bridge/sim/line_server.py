@@ -92,6 +92,11 @@ class LineServer:
         self._selector.register(pty.master, selectors.EVENT_READ, Connection(pty.master, 'rtu'))
         return self.pty_path
 
+    @property
+    def pty_master(self) -> int:
+        """Return the master end of the newest pty: bytes written there reach the client."""
+        return self._ptys[-1].master
+
     def open_tcp(self, host: str = '127.0.0.1', port: int = 0, framing: str = 'mbap') -> int:
         """Listen for TCP clients; ``framing`` 'mbap' (Modbus TCP) or 'rtu' (RTU over TCP)."""
         if framing not in FRAMINGS:

@@ -95,6 +95,11 @@ class ModbusSimServer:
         """Return the TCP port clients connect to (0 before :meth:`open_tcp`)."""
         return self.line.tcp_port
 
+    @property
+    def pty_master(self) -> int:
+        """Return the pty's master end: bytes written there reach the client (line noise)."""
+        return self.line.pty_master
+
     def open_pty(self, link_path: str = '') -> str:
         """Open a pty pair, serve RTU on its master; return the slave's path for clients."""
         return self.line.open_pty(link_path)
