@@ -13,6 +13,12 @@ import re
 
 from docs_helpers import all_blocks, DOCS, pages, parameter_reference, ROOT
 from drive_bridge import config
+from drive_bridge.devices import fc
+from drive_bridge.devices.contracts import FixedControl
+from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.protocol import fc_control
+from drive_bridge.protocol.commands import Command
+from drive_bridge.sim.fc_model import FcModel, FcSimConfig
 import pytest
 
 README_MAX_LINES = 250
@@ -97,3 +103,20 @@ def test_every_page_is_in_the_table_of_contents():
                           if row.strip() and not row.startswith(':'))
     names = {os.path.basename(page)[:-3] for page in pages() if page.startswith(DOCS)}
     assert names - listed == {'index'}
+
+
+def test_troubleshooting_says_what_a_drive_started_at_a_0_percent_reference_reads():
+    # The page said such a drive stays ready; the manual (004 5.6.4, bit 11 Running: "a start
+    # signal or ... output frequency higher than 0 Hz") and the simulated FC 51 say running.
+    model = FcModel(FcSimConfig(), now_s=0.0)
+    model.write_control(fc_control.START_WORD, 0, 0.0)  # start, reference 0 %
+    model.advance(1.0)
+    reading = DriveProfile(fc.DATA, 'fc51').reading(
+        model.status_word(), model.actual_word(), FixedControl(Command.START, 0))
+    assert (reading.state, reading.speed_feedback_pct) == ('running', 0.0)
+    with open(os.path.join(DOCS, 'troubleshooting.md'), encoding='utf-8') as stream:
+        rows = [line for line in stream if line.startswith('| FC') and '0 %' in line]
+    assert rows, 'troubleshooting has no row for a drive started at a 0 % reference'
+    for row in rows:
+        symptom = row.split(' | ')[0]
+        assert f'`{reading.state}`' in symptom and '`ready`' not in symptom, row
