@@ -120,3 +120,24 @@ def test_troubleshooting_says_what_a_drive_started_at_a_0_percent_reference_read
     for row in rows:
         symptom = row.split(' | ')[0]
         assert f'`{reading.state}`' in symptom and '`ready`' not in symptom, row
+
+
+def test_the_readme_and_every_device_page_point_at_the_one_write_rule():
+    # Issue 26: the README's FC 51 and VLT sections stated their own rule ("Nothing, until a
+    # command arrives"), which the code did not follow. The rule is stated once (safety.md);
+    # the README and the device pages link to it, or to a page that carries it out.
+    rule = 'safety.md#what-is-written-and-when'
+    with open(os.path.join(DOCS, 'devices.md'), encoding='utf-8') as stream:
+        toctree = stream.read().split('```{toctree}')[1].split('```')[0]
+    families = [line.strip() for line in toctree.splitlines()[1:] if line.strip() and
+                not line.startswith(':')]
+    assert families == ['mcd', 'lvsg', 'fc51', 'vlt', 'fc_protocol']
+    with open(os.path.join(ROOT, 'README.md'), encoding='utf-8') as stream:
+        texts = {'README.md': stream.read()}
+    for family in families:
+        with open(os.path.join(DOCS, f'{family}.md'), encoding='utf-8') as stream:
+            texts[family] = stream.read()
+    carried_out = {'fc51': 'fc51.md#what-the-bridge-writes'}
+    for name, text in texts.items():
+        assert rule in text or any(link in text for link in carried_out.values()), name
+        assert 'Nothing, until a command arrives' not in text, name
