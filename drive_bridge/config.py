@@ -513,19 +513,32 @@ def duplicate_key_loader():
     return UniqueKeyLoader
 
 
-# rcl's parameters file parser (rcl_yaml_param_parser, parse.c get_value) reads these plain
-# (unquoted) scalars as booleans too; PyYAML reads them as text. So that a file means to
-# drive-bridge what it means to the node (``parity: N`` is false to both), they are read as rcl
-# reads them.
+# rcl's parameters file parser (rcl_yaml_param_parser, parse.c) reads these plain (unquoted)
+# values as booleans too, where PyYAML reads text; and it reads every key as a name, where
+# PyYAML reads ``on:`` or ``n:`` as a boolean. So that a file means to drive-bridge what it
+# means to the node (``parity: N`` is false to both), it is read as rcl reads it.
 RCL_ONLY_BOOLEANS = {'y': True, 'Y': True, 'n': False, 'N': False}
 RCL_BOOLEAN_TAG = 'tag:drive_bridge,2026:rcl_boolean'
+YAML_STR_TAG = 'tag:yaml.org,2002:str'
 
 
 def parameters_file_loader():
     """Return the loader of a parameters file: unique keys, and scalars typed as rcl types them."""
-    class ParametersFileLoader(duplicate_key_loader()):
+    import yaml
+    base = duplicate_key_loader()
+
+    class ParametersFileLoader(base):
         """Load a ROS 2 parameters file as the node reads it."""
 
+    def construct_mapping(loader, node, deep=False):
+        for key_node, _ in node.value:
+            if isinstance(key_node, yaml.ScalarNode):
+                key_node.tag = YAML_STR_TAG  # a key is a name to rcl, whatever it reads like
+        return base.yaml_constructors[yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG](
+            loader, node, deep)
+
+    ParametersFileLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+                                         construct_mapping)
     ParametersFileLoader.add_implicit_resolver(
         RCL_BOOLEAN_TAG, re.compile(r'^[yYnN]$'), list(RCL_ONLY_BOOLEANS))
     ParametersFileLoader.add_constructor(

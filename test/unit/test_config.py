@@ -198,3 +198,14 @@ def test_other_yaml_files_keep_yaml_s_own_types(tmp_path):
     path = tmp_path / 'backup.yaml'  # a backup's text value N stays the text N
     path.write_text('value: N\nother: y\n')
     assert config.load_yaml_file(str(path), 'the backup') == {'value': 'N', 'other': 'y'}
+
+
+def test_a_key_of_a_parameters_file_is_a_name_as_rcl_reads_it(tmp_path):
+    # rcl reads every key as a name; PyYAML read `on:` (and now `n:`) as a boolean key.
+    path = tmp_path / 'line.yaml'
+    path.write_text('/**/drive_bridge:\n  ros__parameters:\n    devices: ["on", "n"]\n'
+                    '    on:\n      family: fc\n    n:\n      family: fc\n      address: 1\n'
+                    '    1: 2\n')
+    parameters = config.load_params_file(str(path))['/**/drive_bridge']
+    assert parameters == {'devices': ['on', 'n'], 'on': {'family': 'fc'},
+                          'n': {'family': 'fc', 'address': 1}, '1': 2}
