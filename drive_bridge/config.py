@@ -514,17 +514,51 @@ def duplicate_key_loader():
     return UniqueKeyLoader
 
 
-def load_yaml_file(path: str, label: str) -> Any:
+# rcl's parameters file parser (rcl_yaml_param_parser, parse.c) reads these plain (unquoted)
+# values as booleans too, where PyYAML reads text; and it reads every key as a name, where
+# PyYAML reads ``on:`` or ``n:`` as a boolean. So that a file means to drive-bridge what it
+# means to the node (``parity: N`` is false to both), it is read as rcl reads it.
+RCL_ONLY_BOOLEANS = {'y': True, 'Y': True, 'n': False, 'N': False}
+RCL_BOOLEAN_TAG = 'tag:drive_bridge,2026:rcl_boolean'
+YAML_STR_TAG = 'tag:yaml.org,2002:str'
+
+
+def parameters_file_loader():
+    """Return the loader of a parameters file: unique keys, and scalars typed as rcl types them."""
+    import yaml
+    base = duplicate_key_loader()
+
+    class ParametersFileLoader(base):
+        """Load a ROS 2 parameters file as the node reads it."""
+
+    def construct_mapping(loader, node, deep=False):
+        for key_node, _ in node.value:
+            if isinstance(key_node, yaml.ScalarNode):
+                key_node.tag = YAML_STR_TAG  # a key is a name to rcl, whatever it reads like
+        return base.yaml_constructors[yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG](
+            loader, node, deep)
+
+    ParametersFileLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+                                         construct_mapping)
+    ParametersFileLoader.add_implicit_resolver(
+        RCL_BOOLEAN_TAG, re.compile(r'^[yYnN]$'), list(RCL_ONLY_BOOLEANS))
+    ParametersFileLoader.add_constructor(
+        RCL_BOOLEAN_TAG, lambda loader, node: RCL_ONLY_BOOLEANS[loader.construct_scalar(node)])
+    return ParametersFileLoader
+
+
+def load_yaml_file(path: str, label: str, loader: Optional[Callable[[], Any]] = None) -> Any:
     """
     Return the content of the YAML file ``path``, refusing a key given twice.
 
     Raises ConfigError in one line naming the file as ``label`` if it cannot be read, is not
-    YAML, or has a key twice (with both lines).
+    YAML, or has a key twice (with both lines). ``loader`` makes the YAML loader to use
+    (default :func:`duplicate_key_loader`).
     """
     import yaml
     try:
         with open(path) as stream:
-            return yaml.load(stream, Loader=duplicate_key_loader())
+            return yaml.load(stream, Loader=(loader or duplicate_key_loader)())
     except OSError as error:
         raise ConfigError(f'cannot read {label}: {error.strerror}') from None
     except ConfigError as error:
@@ -545,7 +579,7 @@ def load_params_file(path: str) -> Dict[str, Dict[str, Any]]:
     key) holding ``ros__parameters``, and the nested form of the ROS 2 docs
     (``line1:`` / ``drive_bridge:`` / ``ros__parameters:``), whose key is ``/line1/drive_bridge``.
     """
-    content = load_yaml_file(path, f'the parameters file {path}')
+    content = load_yaml_file(path, f'the parameters file {path}', parameters_file_loader)
     blocks: Dict[str, Dict[str, Any]] = {}
     if isinstance(content, dict):
         _collect_blocks(content, [], blocks)

@@ -67,9 +67,22 @@ def writes_to(line, unit):
             if frame[0] == unit and frame[1] in WRITE_FUNCTIONS]
 
 
+class ParametersFileDumper(yaml.SafeDumper):
+    """Quote every string, as a parameters file for the node needs (a plain N is false)."""
+
+
+ParametersFileDumper.add_representer(
+    str, lambda dumper, text: dumper.represent_scalar('tag:yaml.org,2002:str', text, style="'"))
+
+
+def parameters_text(content) -> str:
+    """Return ``content`` as the text of a parameters file that the node reads as written."""
+    return yaml.dump(content, Dumper=ParametersFileDumper)
+
+
 def params_file(tmp_path, line, allow_control=True, name='line.yaml'):
     path = tmp_path / name
-    path.write_text(yaml.safe_dump({'/**/drive_bridge': {'ros__parameters': {
+    path.write_text(parameters_text({'/**/drive_bridge': {'ros__parameters': {
         'port': line.pty_path, 'parity': 'N', 'baudrate': 115200, 'timeout': 0.5,
         'devices': ['feeder', 'crusher'],
         'feeder': {'family': 'fc', 'model': 'fc51', 'address': 1,
@@ -512,7 +525,7 @@ def test_config_file_names_the_bus_and_device(line, tmp_path):
 def test_node_picks_the_block_of_a_file_with_two_nodes(line, tmp_path, capsys):
     path = tmp_path / 'two.yaml'
     block = {'port': line.pty_path, 'parity': 'N', 'timeout': 0.5, 'devices': ['conv']}
-    path.write_text(yaml.safe_dump({
+    path.write_text(parameters_text({
         'line1': {'drive_bridge': {'ros__parameters': dict(block, conv={
             'family': 'fc', 'model': 'fc51', 'address': 1})}},
         'line2': {'drive_bridge': {'ros__parameters': dict(block, conv={
@@ -872,13 +885,28 @@ def test_a_parameters_file_is_refused_for_a_name_the_node_refuses(
     config = params_file(tmp_path, line)
     content = yaml.safe_load(config.read_text())
     content['/**/drive_bridge']['ros__parameters'][key] = value
-    config.write_text(yaml.safe_dump(content))
+    config.write_text(parameters_text(content))
     line.stats.frames.clear()
     for argv in (['status', '--device', 'feeder'], ['scan', '--addresses', '1-1']):
         assert run(argv[0], '--config', config, '--quiet', *argv[1:])[0] == 2
         error = one_line(capsys)
         assert error.startswith(f'drive-bridge: {config}: {told}'), error
         assert error.endswith(' (the node refuses it too)\n'), error
+    assert not line.stats.frames  # refused before the port was opened
+
+
+def test_a_parameters_file_with_an_unquoted_parity_n_is_refused_as_the_node_refuses_it(
+        line, tmp_path, capsys):
+    # To the node (rcl's parser) a plain N is false; drive-bridge --config read it as "N".
+    config = params_file(tmp_path, line)
+    config.write_text(config.read_text().replace("'parity': 'N'\n", 'parity: N\n'))
+    assert 'parity: N\n' in config.read_text()
+    line.stats.frames.clear()
+    for argv in (['status', '--device', 'feeder'], ['scan', '--addresses', '1-1']):
+        assert run(argv[0], '--config', config, '--quiet', *argv[1:])[0] == 2
+        assert one_line(capsys) == (
+            "drive-bridge: parameter 'parity' = False has the wrong type: allowed N, E, O "
+            '(write parity: "N" with quotes: unquoted N is YAML false)\n')
     assert not line.stats.frames  # refused before the port was opened
 
 

@@ -1,6 +1,6 @@
 """Unit tests of the AP ASCII codec (every worked frame) and the MCD AP ASCII profile."""
 
-from drive_bridge.devices.contracts import FixedControl
+from drive_bridge.devices.contracts import FixedControl, SlowReadouts
 from drive_bridge.devices.mcd_ascii import McdAsciiProfile
 from drive_bridge.errors import CommandRefused, ProtocolError
 from drive_bridge.protocol import ap_ascii
@@ -123,3 +123,21 @@ def test_mcd3000_has_its_own_trip_table():
     assert profile.trip(255) == (0, '')
     assert McdAsciiProfile('mcd500').trip(2) == (2, 'Motor overload (thermal model)')
     assert 'Hand On' in profile.explain_exception(ap_ascii.BEL)
+
+
+def test_a_trip_code_is_taken_only_from_the_poll_that_asks_for_it():
+    # Issue 26's audit: the trip code (C18) is the MCD's only slow readout over AP ASCII. It is
+    # asked for in every poll whose status shows a trip, after the status; in the others it
+    # is not, and the trip read before never names the state of a later poll.
+    now_s = [0.0]
+    profile = McdAsciiProfile('mcd500', slow_readouts=SlowReadouts(10.0, lambda: now_s[0]))
+    drive_cycle(profile, [0x43, 255, 80, 40])  # the slow readouts' turn: C18 asked
+    now_s[0] = 1.0
+    requests, tripped = drive_cycle(profile, [0x46, 2, 0, 106])
+    assert requests[:2] == [AsciiRequest('C22', 'status'), AsciiRequest('C18', 'status')]
+    assert (tripped.state, tripped.trip_code) == ('tripped', 2)
+    requests, reset = drive_cycle(profile, [0x41, 0, 100])  # reset at the starter
+    assert AsciiRequest('C18', 'status') not in requests
+    assert (reset.state, reset.trip_code, reset.trip_name) == ('ready', 0, '')
+    _, again = drive_cycle(profile, [0x46, 3, 0, 100])  # another trip: its own code
+    assert (again.state, again.trip_code) == ('tripped', 3)

@@ -112,6 +112,27 @@ def test_no_write_at_all_for_a_drive_that_was_never_commanded_after_an_outage():
     assert bus.snapshot('conv').online and drive.writes() == []
 
 
+def test_a_drive_stopped_before_an_outage_gets_its_stop_word_again_after_it():
+    # docs/safety.md, the write rule: "A device that was stopped keeps getting its stop image
+    # after an outage, as before it" (and no notice: no run was held).
+    bus, drive, clock, events = make_bus()
+    run_for(bus, clock, 0.3)
+    bus.submit_command('conv', 'start')
+    run_for(bus, clock, 0.5)
+    bus.submit_command('conv', 'stop')
+    run_for(bus, clock, 0.5)
+    assert control_words(drive)[-1] == 0x043C
+    drive.silent = True
+    run_for(bus, clock, 1.0)
+    assert not bus.snapshot('conv').online
+    count = len(drive.writes())
+    drive.silent = False
+    run_for(bus, clock, 3.0)
+    after = control_words(drive)[count:]
+    assert bus.snapshot('conv').online and len(after) >= 10 and set(after) == {0x043C}
+    assert not any('not resumed' in getattr(e, 'message', '') for e in events)
+
+
 def test_a_trip_ends_the_run_word_the_keepalive_writes_a_stop():
     bus, drive, clock, events = make_bus()
     run_for(bus, clock, 0.3)

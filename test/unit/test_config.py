@@ -175,3 +175,37 @@ def test_the_node_declares_the_names_the_check_takes():
     declared = config.declared_parameters('modbus_rtu', {'drive': 'fc'})
     assert {'baudrate', 'autostart', 'use_sim_time', 'drive.comms_timeout'} <= declared
     assert not {'ap_nak_retries', 'address_format', 'drive.start_time'} & declared
+
+
+# -- a parameters file means to drive-bridge what it means to the node ----------------------
+@pytest.mark.parametrize('text, value', [
+    ('N', False), ('n', False), ('Y', True), ('y', True),  # rcl's booleans, PyYAML's text
+    ('no', False), ('on', True),  # booleans to both
+    ('"N"', 'N'), ("'y'", 'y'), ('E', 'E'), ('Nn', 'Nn'),  # text to both
+])
+def test_a_parameters_file_is_read_with_rcl_s_types(tmp_path, text, value):
+    # rcl_yaml_param_parser reads a plain N as false: the node refused `parity: N` while
+    # drive-bridge --config read the same file as parity "N" and ran.
+    path = tmp_path / 'line.yaml'
+    path.write_text(f'/**/drive_bridge:\n  ros__parameters:\n    parity: {text}\n'
+                    f'    devices: [{text}]\n')
+    parameters = config.load_params_file(str(path))['/**/drive_bridge']
+    assert parameters['parity'] == value and type(parameters['parity']) is type(value)
+    assert parameters['devices'] == [value]
+
+
+def test_other_yaml_files_keep_yaml_s_own_types(tmp_path):
+    path = tmp_path / 'backup.yaml'  # a backup's text value N stays the text N
+    path.write_text('value: N\nother: y\n')
+    assert config.load_yaml_file(str(path), 'the backup') == {'value': 'N', 'other': 'y'}
+
+
+def test_a_key_of_a_parameters_file_is_a_name_as_rcl_reads_it(tmp_path):
+    # rcl reads every key as a name; PyYAML read `on:` (and now `n:`) as a boolean key.
+    path = tmp_path / 'line.yaml'
+    path.write_text('/**/drive_bridge:\n  ros__parameters:\n    devices: ["on", "n"]\n'
+                    '    on:\n      family: fc\n    n:\n      family: fc\n      address: 1\n'
+                    '    1: 2\n')
+    parameters = config.load_params_file(str(path))['/**/drive_bridge']
+    assert parameters == {'devices': ['on', 'n'], 'on': {'family': 'fc'},
+                          'n': {'family': 'fc', 'address': 1}, '1': 2}

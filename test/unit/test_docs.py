@@ -13,6 +13,12 @@ import re
 
 from docs_helpers import all_blocks, DOCS, pages, parameter_reference, ROOT
 from drive_bridge import config
+from drive_bridge.devices import fc
+from drive_bridge.devices.contracts import FixedControl
+from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.protocol import fc_control
+from drive_bridge.protocol.commands import Command
+from drive_bridge.sim.fc_model import FcModel, FcSimConfig
 import pytest
 
 README_MAX_LINES = 250
@@ -97,3 +103,41 @@ def test_every_page_is_in_the_table_of_contents():
                           if row.strip() and not row.startswith(':'))
     names = {os.path.basename(page)[:-3] for page in pages() if page.startswith(DOCS)}
     assert names - listed == {'index'}
+
+
+def test_troubleshooting_says_what_a_drive_started_at_a_0_percent_reference_reads():
+    # The page said such a drive stays ready; the manual (004 5.6.4, bit 11 Running: "a start
+    # signal or ... output frequency higher than 0 Hz") and the simulated FC 51 say running.
+    model = FcModel(FcSimConfig(), now_s=0.0)
+    model.write_control(fc_control.START_WORD, 0, 0.0)  # start, reference 0 %
+    model.advance(1.0)
+    reading = DriveProfile(fc.DATA, 'fc51').reading(
+        model.status_word(), model.actual_word(), FixedControl(Command.START, 0))
+    assert (reading.state, reading.speed_feedback_pct) == ('running', 0.0)
+    with open(os.path.join(DOCS, 'troubleshooting.md'), encoding='utf-8') as stream:
+        rows = [line for line in stream if line.startswith('| FC') and '0 %' in line]
+    assert rows, 'troubleshooting has no row for a drive started at a 0 % reference'
+    for row in rows:
+        symptom = row.split(' | ')[0]
+        assert f'`{reading.state}`' in symptom and '`ready`' not in symptom, row
+
+
+def test_the_readme_and_every_device_page_point_at_the_one_write_rule():
+    # Issue 26: the README's FC 51 and VLT sections stated their own rule ("Nothing, until a
+    # command arrives"), which the code did not follow. The rule is stated once (safety.md);
+    # the README and the device pages link to it, or to a page that carries it out.
+    rule = 'safety.md#what-is-written-and-when'
+    with open(os.path.join(DOCS, 'devices.md'), encoding='utf-8') as stream:
+        toctree = stream.read().split('```{toctree}')[1].split('```')[0]
+    families = [line.strip() for line in toctree.splitlines()[1:] if line.strip() and
+                not line.startswith(':')]
+    assert families == ['mcd', 'lvsg', 'fc51', 'vlt', 'fc_protocol']
+    with open(os.path.join(ROOT, 'README.md'), encoding='utf-8') as stream:
+        texts = {'README.md': stream.read()}
+    for family in families:
+        with open(os.path.join(DOCS, f'{family}.md'), encoding='utf-8') as stream:
+            texts[family] = stream.read()
+    carried_out = {'fc51': 'fc51.md#what-the-bridge-writes'}
+    for name, text in texts.items():
+        assert rule in text or any(link in text for link in carried_out.values()), name
+        assert 'Nothing, until a command arrives' not in text, name
