@@ -14,7 +14,7 @@ VERSION = ElementTree.parse(os.path.join(HERE, 'package.xml')).findtext('version
 setup(
     name=PACKAGE,
     version=VERSION,
-    packages=find_packages(exclude=['test', 'test.*']),
+    packages=find_packages(include=['drive_bridge', 'drive_bridge.*']),  # not test/, bench/
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),

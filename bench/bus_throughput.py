@@ -23,8 +23,8 @@ from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import TransportError
 from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.sim.wire_pacer import LineTiming
+from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport, PYMODBUS_VERSION
-from drive_bridge.transport.protocols import make_transport
 from paced_line import PacedSimulator
 
 UNITS = (20, 21, 22)

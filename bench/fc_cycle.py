@@ -24,9 +24,9 @@ from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.fc_protocol_drive import FcProtocolDriveProfile
 from drive_bridge.protocol import fc_telegram as fcp
 from drive_bridge.sim.wire_pacer import LineTiming, MODBUS_GAP_CHARACTERS, transactions
+from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.modbus import PYMODBUS_VERSION
-from drive_bridge.transport.protocols import make_transport
 from paced_line import PacedSimulator
 
 READOUT_PERIOD_S = 1.0  # the node's default

@@ -1,12 +1,15 @@
 """
 Reconnect drills: unplugged adapter, drive power cycle, gateway restart; prints the figures.
 
-See :mod:`drive_bridge.tools.reconnect`. Run: .venv/bin/python bench/reconnect.py [cycles]
+See :mod:`reconnect_drill`. Run: .venv/bin/python bench/reconnect.py [cycles]
 """
 
 import sys
 
-from drive_bridge.tools.reconnect import DRILLS, run_drill
+from paced_line import TEST_DIR
+
+sys.path.insert(0, TEST_DIR)  # the drills (test/reconnect_drill.py: test code, not shipped)
+from reconnect_drill import DRILLS, run_drill  # noqa: E402
 
 
 def main(argv) -> int:

@@ -3,18 +3,21 @@ Soak: 100,000 transactions on one bus with 10 % faults, checked by the oracle.
 
 Outages and trips too; prints the figures. Devices: MCD 500, MCD 3000, FC 51, VLT 5000,
 an MCD 202 behind a Profibus gateway, a monitor-only FC 51 and one address nobody answers
-(see :mod:`drive_bridge.tools.soak`). Run:
+(see :mod:`soak_harness.runner`). Run:
 .venv/bin/python bench/soak.py [transactions] [fault rate] [seed] [timeout s]
     [--line pty|virtual] [--broken VARIANT|all] [--in-flight N] [--no-lvsg-quick-stop]
-``--broken`` runs deliberately broken bridges (:mod:`drive_bridge.tools.soak_broken`) and
+``--broken`` runs deliberately broken bridges (:mod:`soak_harness.broken`) and
 then the unbroken one with the same settings, and prints what the oracle caught.
 """
 
 import argparse
 import sys
 
-from drive_bridge.tools.soak import run_soak, SoakSettings, transport_class
-from drive_bridge.tools.soak_broken import broken, EXPECTED_KINDS, VARIANTS
+from paced_line import TEST_DIR
+
+sys.path.insert(0, TEST_DIR)  # the soak harness (test/soak_harness: test code, not shipped)
+from soak_harness.broken import broken, EXPECTED_KINDS, VARIANTS  # noqa: E402
+from soak_harness.runner import run_soak, SoakSettings, transport_class  # noqa: E402
 
 
 def parse(argv) -> argparse.Namespace:

@@ -6,7 +6,7 @@ drive_bridge_node on the soak line with 10 % faults, outages and trips, random s
 the client's record.
 
 Run: .venv/bin/python bench/soak_node.py [duration s] [seed] [fault rate] [timeout s]
-[broken variant]; a broken variant (:mod:`drive_bridge.tools.soak_broken`) runs the node with
+[broken variant]; a broken variant (:mod:`soak_harness.broken`) runs the node with
 that safety rule broken on purpose, and the oracle must report it.
 """
 

@@ -17,8 +17,9 @@ from drive_bridge.devices.contracts import Family
 from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.errors import ConfigError
 from drive_bridge.settings import check_value, Setting
+from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.link import LinkSettings
-from drive_bridge.transport.protocols import make_transport, protocol_settings, PROTOCOLS
+from drive_bridge.transport.protocols import protocol_settings, PROTOCOLS
 
 BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
 PARITIES = ('N', 'E', 'O')

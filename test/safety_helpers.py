@@ -53,7 +53,7 @@ def wait_for(predicate: Callable[[], bool], timeout_s: float = 10.0,
 
 def sim_pty_master(server) -> int:
     """Return the pty master of a simulator: what is written there reaches the bridge."""
-    return server._ptys[-1].master  # the simulator does not expose it
+    return server.pty_master
 
 
 def recorded(server) -> int:

@@ -1,7 +1,7 @@
 """
 The soak through the node: ``drive_bridge_node`` in a subprocess on the soak's line.
 
-The same simulated line as the bus soak (:mod:`drive_bridge.tools.soak`: two MCD starters,
+The same simulated line as the bus soak (:mod:`soak_harness.runner`: two MCD starters,
 two drives, an MCD 202 behind a gateway, a monitor-only FC 51, a dead address), with faults,
 outages and trips, served from this process on a pty. An rclpy client calls the devices'
 Trigger services at random, several calls in flight at once (one per device), publishes
@@ -10,7 +10,7 @@ what each reply said and the ``<dev>/state`` it was told (offline, tripped). The
 with SIGTERM: the node must stop every motor that may run because of it, except the
 devices with ``stop_on_shutdown: false`` (the MCD 3000 here), which get no write after it.
 
-The oracle (:mod:`drive_bridge.tools.soak_oracle`) checks the line's log against that record.
+The oracle (:mod:`soak_harness.oracle`) checks the line's log against that record.
 Answers and states travel through ROS, so they are placed when the client received them
 (the oracle's non-exact mode). Used by ``test/ros/test_soak_node.py`` and
 ``bench/soak_node.py``.
@@ -28,15 +28,15 @@ import time
 from typing import Dict, List, Optional, Tuple
 
 from drive_bridge.sim.faults import FaultPlan
-from drive_bridge.tools.soak import (
-    commands_for, Disturbances, LINE, line_config, LineDevice, make_line, random_reference,
-    running_motors)
-from drive_bridge.tools.soak_oracle import (
-    as_float32, ClientLog, Oracle, outcome_of_reply, Request, summarize, Violation,
-    VIOLATION_KINDS)
 import rclpy
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from ros_helpers import node_output, start_node, write_params
+from soak_harness.oracle import (
+    as_float32, ClientLog, Oracle, outcome_of_reply, Request, summarize, Violation,
+    VIOLATION_KINDS)
+from soak_harness.runner import (
+    commands_for, Disturbances, LINE, line_config, LineDevice, make_line, random_reference,
+    running_motors)
 from std_msgs.msg import Float32, String
 from std_srvs.srv import Trigger
 

@@ -2,14 +2,14 @@
 Run drive_bridge_node with one safety rule broken on purpose (the node soak's catch proof).
 
 Usage: python test/soak_patched_node.py VARIANT --ros-args --params-file FILE; VARIANT is one
-of :data:`drive_bridge.tools.soak_broken.VARIANTS`. Never run it against real equipment.
+of :data:`soak_harness.broken.VARIANTS`. Never run it against real equipment.
 """
 
 import sys
 
 from drive_bridge.ros import node
-from drive_bridge.tools.soak_broken import broken
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
+from soak_harness.broken import broken
 
 
 def main() -> int:

@@ -13,6 +13,7 @@ from typing import Any, Dict, List, Tuple
 from drive_bridge import config
 from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.settings import Setting
+from drive_bridge.sim.registry import SIMULATORS
 from drive_bridge.transport.protocols import PROTOCOLS
 
 ROS_TYPES = {bool: 'bool', int: 'integer', float: 'double', str: 'string',
@@ -97,11 +98,17 @@ def allowed_of(setting: Setting) -> str:
     return ''
 
 
+def simulated_models(family: str) -> Tuple[str, ...]:
+    """Return the models of ``family`` that the simulator has (its sim-side registry entry)."""
+    simulator = SIMULATORS.get(family)
+    return simulator.models if simulator else ()
+
+
 def family_rows() -> List[Tuple[str, ...]]:
     """Return (family, what it is, models, addresses, protocols, simulated models) rows."""
     return [(family.name, family.description, ', '.join(family.models),
              f'{family.address_range[0]}-{family.address_range[1]}',
-             ', '.join(family.protocols), ', '.join(family.sim_models))
+             ', '.join(family.protocols), ', '.join(simulated_models(family.name)))
             for family in FAMILIES.values()]
 
 

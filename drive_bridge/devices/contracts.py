@@ -364,8 +364,9 @@ class Family:
 
     ``settings``: the device settings this family takes beyond the common ones.
     ``make_profile(model, protocol, options)`` builds a profile from validated options (the
-    common and the family settings by name). ``make_simulator(model, now_s, **settings)``
-    builds a simulated device of one of ``sim_models``.
+    common and the family settings by name). The family's simulator is not named here: it
+    has its own entry on the simulator side (:mod:`drive_bridge.sim.registry`), which
+    imports the family, never the reverse.
     """
 
     name: str
@@ -375,6 +376,4 @@ class Family:
     protocols: Tuple[str, ...]
     settings: Tuple[Any, ...]
     make_profile: Callable[[str, str, Mapping[str, Any]], DeviceProfile]
-    sim_models: Tuple[str, ...] = ()
-    make_simulator: Optional[Callable[..., Any]] = None
     reference: bool = False  # takes a speed reference (drives)

@@ -554,10 +554,3 @@ def make_drive_profile(data: DriveFamilyData) -> Callable[[str, str, Mapping[str
             return FcProtocolDriveProfile(*common)
         return DriveProfile(*common, options.get('drive_link_timeout', 0.0))
     return make
-
-
-def make_drive_simulator(model: str, now_s: float, **settings: Any) -> Any:
-    """Return a simulated drive of ``model`` with its Modbus face (see :mod:`..sim`)."""
-    from drive_bridge.sim.fc_device import FcSimDevice
-    from drive_bridge.sim.fc_model import FcModel, FcSimConfig
-    return FcSimDevice(FcModel(FcSimConfig(model=model, **settings), now_s))

@@ -10,7 +10,7 @@ from typing import Dict, Optional, Tuple
 
 from drive_bridge.devices.contracts import Family
 from drive_bridge.devices.drive import (
-    COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile, make_drive_simulator)
+    COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile)
 from drive_bridge.devices.fc51_parameters import FC51_PARAMETERS
 from drive_bridge.devices.parameters import FC_CONVERSION_FACTORS, ParameterSpec
 from drive_bridge.settings import Setting
@@ -144,5 +144,4 @@ ENTRY = Family(
     models=MODELS, address_range=ADDRESS_RANGE,
     protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'fc_protocol'),
     settings=(COMMS_TIMEOUT, COMMS_TIMEOUT_FUNCTION, CURRENT_PARAMETER),
-    make_profile=make_drive_profile(DATA), sim_models=('fc51',),
-    make_simulator=make_drive_simulator, reference=True)
+    make_profile=make_drive_profile(DATA), reference=True)

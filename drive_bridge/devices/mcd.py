@@ -382,17 +382,9 @@ def make_profile(model: str, protocol: str, options: Mapping[str, Any]) -> McdPr
     return McdProfile(model, scale, slow)
 
 
-def make_simulator(model: str, now_s: float, **settings: Any) -> Any:
-    """Return a simulated MCD starter of ``model`` with its Modbus Module face."""
-    from drive_bridge.sim.mcd_device import McdSimDevice
-    from drive_bridge.sim.mcd_model import McdModel, McdSimConfig
-    return McdSimDevice(McdModel(McdSimConfig(model=model, **settings), now_s))
-
-
 ENTRY = Family(
     name=FAMILY,
     description='MCD 201/202/500 via the MCD Modbus Module, MCD 3000 via the Remote Operator',
     models=MODELS, address_range=ADDRESS_RANGE,
     protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'ap_ascii'), settings=(),
-    make_profile=make_profile, sim_models=tuple(MODEL_FEATURES),
-    make_simulator=make_simulator)
+    make_profile=make_profile)

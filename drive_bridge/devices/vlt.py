@@ -11,7 +11,7 @@ from typing import Dict, Optional
 
 from drive_bridge.devices.contracts import Family
 from drive_bridge.devices.drive import (
-    COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile, make_drive_simulator)
+    COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile)
 from drive_bridge.devices.parameters import ParameterSpec, VLT_CONVERSION_FACTORS
 from drive_bridge.devices.vlt_parameters import VLT_PARAMETERS
 from drive_bridge.settings import Setting
@@ -91,5 +91,4 @@ ENTRY = Family(
     models=MODELS, address_range=ADDRESS_RANGE,
     protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'fc_protocol'),
     settings=(COMMS_TIMEOUT, DRIVE_LINK_TIMEOUT, CURRENT_PARAMETER),
-    make_profile=make_drive_profile(DATA), sim_models=MODELS,
-    make_simulator=make_drive_simulator, reference=True)
+    make_profile=make_drive_profile(DATA), reference=True)

@@ -1,23 +1,18 @@
-"""Every simulated device model by name (from the family registry), and a simulated bus."""
+"""Every simulated device model by name (from the simulator registry), and a simulated bus."""
 
 import time
 from typing import Dict, Optional
 
-from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
-
-# model name -> family name, for every family that has a simulator.
-SIM_MODELS: Dict[str, str] = {model: family.name for family in FAMILIES.values()
-                              if family.make_simulator is not None
-                              for model in family.sim_models}
+from drive_bridge.sim.registry import SIM_MODELS, SIMULATORS
 
 
 def make_device(model: str, now_s: Optional[float] = None, **settings):
     """Return one simulated device of ``model`` (settings go to its family's config)."""
     if model not in SIM_MODELS:
         raise ValueError(f'unknown simulated model {model!r}: allowed {", ".join(SIM_MODELS)}')
-    family = FAMILIES[SIM_MODELS[model]]
-    return family.make_simulator(model, time.monotonic() if now_s is None else now_s,
+    simulator = SIMULATORS[SIM_MODELS[model]]
+    return simulator.make_device(model, time.monotonic() if now_s is None else now_s,
                                  **settings)
 
 

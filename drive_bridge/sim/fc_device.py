@@ -14,12 +14,13 @@ bad addresses with 64, bad lengths with 66, other functions with 67.
 """
 
 import struct
-from typing import Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.protocol.words import coils_to_words, words_to_coils
-from drive_bridge.sim.fc_model import FcModel, ParameterError
+from drive_bridge.sim.fc_model import FcModel, FcSimConfig
+from drive_bridge.sim.fc_parameter_store import ParameterError
 
 ILLEGAL_FUNCTION, ILLEGAL_ADDRESS, ILLEGAL_VALUE, DEVICE_FAILURE = 1, 2, 3, 4
 # The option card's own codes for the same faults ("VLT 6000 Errors").
@@ -175,3 +176,8 @@ class FcSimDevice:
         if (address + 1) % 10:
             raise SlaveError(ILLEGAL_ADDRESS)
         return (address + 1) // 10
+
+
+def make_drive_device(model: str, now_s: float, **settings: Any) -> FcSimDevice:
+    """Return a simulated drive of ``model`` (settings go to its :class:`FcSimConfig`)."""
+    return FcSimDevice(FcModel(FcSimConfig(model=model, **settings), now_s))

@@ -19,9 +19,9 @@ import math
 from typing import Deque, Dict, Optional
 
 from drive_bridge.devices import fc, vlt
-from drive_bridge.devices.parameters import DATA_TYPES, ParameterSpec, TEXT
+from drive_bridge.devices.parameters import ParameterSpec
 from drive_bridge.protocol import fc_control as ctl, fc_scaling
-from drive_bridge.protocol.words import join_u32, registers_to_text, text_to_registers
+from drive_bridge.sim.fc_parameter_store import FcParameterStore
 
 # Alarm word bits (manual 004 section 7.1.1).
 ALARM_CONTROL_WORD_TIMEOUT = 4
@@ -35,17 +35,6 @@ VLT_BEYOND_TABLE = ParameterSpec(205, 'Maximum Reference', 'int32', -3, setting=
 VLT_MAXIMUM_REFERENCE_RAW = 50000  # 50.000 Hz
 # Motor current readout of each VLT model (the other model's number is no parameter there).
 VLT_CURRENT_PARAMETER = {'vlt5000': 520, 'vlt6000': 514}
-# Detail codes of register 7 (manual 004 section 5.3.2).
-NO_SUCH_PARAMETER, NO_WRITE_ACCESS, VALUE_OUT_OF_LIMITS = 0, 1, 2
-TYPE_MISMATCH, NOT_IN_THIS_MODE = 5, 17
-
-
-class ParameterError(Exception):
-    """A parameter access fails: exception 04 with ``detail`` in register 7."""
-
-    def __init__(self, detail: int):
-        super().__init__(fc.LAST_ERROR_DETAILS.get(detail, str(detail)))
-        self.detail = detail
 
 
 @dataclass
@@ -69,15 +58,19 @@ class FcSimConfig:
 
 
 class FcModel:
-    """One FC 51 and its built-in Modbus RTU interface."""
+    """
+    One FC-profile drive: control word, ramps, comms timeout, current, heat and alarms.
+
+    Its parameters are a :class:`FcParameterStore` (``parameters`` is the store's dict of
+    raw values by number, ``table`` its parameter table); the live readouts come from here.
+    """
 
     def __init__(self, config: Optional[FcSimConfig] = None, now_s: float = 0.0):
         self.config = config or FcSimConfig()
         self.family = 'vlt' if self.config.model.startswith('vlt') else 'fc'
-        data = vlt.DATA if self.family == 'vlt' else fc.DATA
-        self.table: Dict[int, ParameterSpec] = dict(data.table(self.config.model))
-        if self.family == 'vlt':
-            self.table[VLT_BEYOND_TABLE.number] = VLT_BEYOND_TABLE
+        self.store = parameter_store(self.config, self.family)
+        self.table = self.store.table
+        self.parameters = self.store.values  # by number, raw units (the store's own dict)
         self.now_s = now_s
         self.control_word = 0  # last control word received (0 = not yet)
         self.reference_word = 0
@@ -91,22 +84,6 @@ class FcModel:
         self.timeout_active = False
         self.last_error = 0
         self.control_words_received: Deque[int] = deque(maxlen=1000)  # the latest
-        # The ramps live under the FC numbers 3-41, 3-42 and 3-81 in both variants.
-        self.parameters: Dict[int, object] = {
-            341: round(self.config.ramp_up_s * 100), 342: round(self.config.ramp_down_s * 100),
-            381: round(self.config.quick_stop_ramp_s * 100),
-        }
-        self.parameters.update({
-            124: round(self.config.motor_current_a * 100),
-            803: round(self.config.ctw_timeout_s * 10), 804: self.config.ctw_timeout_function,
-            3: 0,
-        } if self.family == 'fc' else {
-            104: 50, VLT_BEYOND_TABLE.number: VLT_MAXIMUM_REFERENCE_RAW})
-        for number, spec in self.table.items():  # every setting of the table has a value
-            if spec.setting:
-                self.parameters.setdefault(number, initial_raw(spec, data.conversion_factors))
-        self.parameters.update(self.config.extra_parameters)
-        self.index = 0  # FC: register 9; option card: IND, register 1
         self.card_timeouts = [0, 0]  # option card registers 2 and 3, 10 ms units
 
     # -- time ---------------------------------------------------------------------------
@@ -265,6 +242,15 @@ class FcModel:
         return fc_scaling.percent_to_word(max(-200.0, min(199.99, self.output_pct)))
 
     # -- parameters ---------------------------------------------------------------------
+    @property
+    def index(self) -> int:
+        """Return the index register (FC: register 9; option card: IND, register 1)."""
+        return self.store.index
+
+    @index.setter
+    def index(self, value: int) -> None:
+        self.store.index = value
+
     def readout(self, number: int) -> Optional[object]:
         """Return the live value of a readout parameter (raw units), or None."""
         current_x100 = round(self.motor_current_a() * 100)
@@ -287,64 +273,30 @@ class FcModel:
     def read_parameter(self, number: int, count: int, now_s: float) -> list:
         """Return ``count`` registers of parameter ``number``; raise ParameterError."""
         self.advance(now_s)
-        value = self.readout(number)
-        if value is None:
-            value = self.parameters.get(number)
-        if value is None:
-            raise ParameterError(NO_SUCH_PARAMETER)
-        if isinstance(value, str):
-            self._check_text_mode(vlt.TEXT_READ_INDEX)
-            stored = text_to_registers(value, len(value) + len(value) % 2)
-            if self.family == 'vlt':  # manual 003 "Text Blocks": space filled to the request
-                return (stored + [0x2020] * count)[:count]
-            # Manual 004 section 5.4.4: a longer request gets a truncated answer.
-            return stored[:count]
-        registers = self._registers(number)
-        if count > registers:
-            raise ParameterError(TYPE_MISMATCH)
-        raw = int(value) & (0xFFFFFFFF if registers == 2 else 0xFFFF)
-        return ([raw >> 16, raw & 0xFFFF] if registers == 2 else [raw])[:count]
+        return self.store.read(number, count, self.readout(number))
 
     def write_parameter(self, number: int, registers: list, now_s: float) -> None:
         """Store a parameter write; raise ParameterError with register 7's detail."""
         self.advance(now_s)
-        if self.readout(number) is not None:
-            raise ParameterError(NO_WRITE_ACCESS)
-        if number not in self.parameters:
-            raise ParameterError(NO_SUCH_PARAMETER)
-        spec = self.table.get(number)
-        if spec is not None and spec.data_type == TEXT:
-            self._check_text_mode(vlt.TEXT_WRITE_INDEX)
-            if len(registers) > 10:
-                raise ParameterError(VALUE_OUT_OF_LIMITS)
-            self.parameters[number] = registers_to_text(registers)
-            return
-        if len(registers) != self._registers(number):
-            raise ParameterError(TYPE_MISMATCH)
-        value = join_u32(*registers) if len(registers) == 2 else registers[0]
-        if number == 804 and self.family == 'fc' and value > TIMEOUT_TRIP:
-            raise ParameterError(VALUE_OUT_OF_LIMITS)
-        if number in (124, 104) and self.output_pct != 0.0:
-            raise ParameterError(NOT_IN_THIS_MODE)
-        self.parameters[number] = value
-
-    def _check_text_mode(self, mode: int) -> None:
-        """Option card: a text access needs IND = 0x0400 (read) or 0x0500 (write) first."""
-        if self.family == 'vlt' and self.index & 0xFF00 != mode:
-            raise ParameterError(TYPE_MISMATCH)
-
-    def _registers(self, number: int) -> int:
-        spec = self.table.get(number)
-        if spec is None or spec.data_type == TEXT:
-            return 1
-        return DATA_TYPES[spec.data_type][0]
+        self.store.write(number, registers, is_readout=self.readout(number) is not None,
+                         running=self.output_pct != 0.0)
 
 
-def initial_raw(spec: ParameterSpec, factors: Dict[int, float]) -> object:
-    """Return the raw value a simulated drive starts with: the default, else the minimum."""
-    if spec.data_type == TEXT:
-        return str(spec.default or '')
-    value = spec.default if spec.default is not None else spec.minimum
-    if value is None:
-        value = min(spec.options) if spec.options else 0
-    return round(value / factors.get(spec.conversion, 1.0))
+def parameter_store(config: FcSimConfig, family: str) -> FcParameterStore:
+    """Return the parameters a drive of ``family`` starts with, its configuration's among them."""
+    data = vlt.DATA if family == 'vlt' else fc.DATA
+    table: Dict[int, ParameterSpec] = dict(data.table(config.model))
+    # The ramps live under the FC numbers 3-41, 3-42 and 3-81 in both variants.
+    configured: Dict[int, object] = {
+        341: round(config.ramp_up_s * 100), 342: round(config.ramp_down_s * 100),
+        381: round(config.quick_stop_ramp_s * 100)}
+    if family == 'vlt':
+        table[VLT_BEYOND_TABLE.number] = VLT_BEYOND_TABLE
+        configured.update({104: 50, VLT_BEYOND_TABLE.number: VLT_MAXIMUM_REFERENCE_RAW})
+    else:
+        configured.update({124: round(config.motor_current_a * 100),
+                           803: round(config.ctw_timeout_s * 10),
+                           804: config.ctw_timeout_function, 3: 0})
+    return FcParameterStore(table, data.conversion_factors, configured, config.extra_parameters,
+                            maxima={} if family == 'vlt' else {804: TIMEOUT_TRIP},
+                            option_card=family == 'vlt')

@@ -36,7 +36,8 @@ from drive_bridge.devices.parameters import DATA_TYPES, TEXT
 from drive_bridge.protocol import fc_telegram as fc
 from drive_bridge.protocol.fc_telegram import FcTelegram
 from drive_bridge.protocol.words import join_u32, registers_to_text, text_to_registers
-from drive_bridge.sim.fc_model import FcModel, ParameterError
+from drive_bridge.sim.fc_model import FcModel
+from drive_bridge.sim.fc_parameter_store import ParameterError
 
 MAX_TEXT_REGISTERS = 127
 

@@ -37,6 +37,7 @@ from drive_bridge.protocol.fc_telegram import FcTelegram
 from drive_bridge.sim.faults import FaultInjector
 from drive_bridge.sim.fc_model import FcModel, FcSimConfig
 from drive_bridge.sim.fc_protocol_device import FcProtocolDevice
+from drive_bridge.sim.line_server import Connection
 from drive_bridge.sim.modbus_server import ModbusSimServer
 
 FC_PROTOCOL_FAULTS = ('bcc', 'no_reply', 'slow', 'garbage', 'truncated', 'wrong_address')
@@ -87,7 +88,8 @@ class FcProtocolSimServer(ModbusSimServer):
         return super().open_tcp(host, port, 'rtu')
 
     # -- framing ------------------------------------------------------------------------
-    def _process(self, connection, gap_elapsed: bool) -> None:
+    def take_bytes(self, connection: Connection, gap_elapsed: bool) -> None:
+        """Answer the whole telegrams in ``connection``'s buffer (the line's StreamHandler)."""
         while connection.buffer:
             result = fc.decode(connection.buffer)
             if result.telegram is None and not result.error:
@@ -106,7 +108,7 @@ class FcProtocolSimServer(ModbusSimServer):
                 continue
             self._serve_telegram(connection, result.telegram, raw)
 
-    def _serve_telegram(self, connection, telegram: FcTelegram, raw: bytes) -> None:
+    def _serve_telegram(self, connection: Connection, telegram: FcTelegram, raw: bytes) -> None:
         device, address = self._addressee(telegram, raw)
         if device is None:
             return
@@ -145,7 +147,8 @@ class FcProtocolSimServer(ModbusSimServer):
                 return None, target.address
             return device, target.address
 
-    def _send_telegram(self, connection, request: bytes, reply: bytes, slow: bool) -> None:
+    def _send_telegram(self, connection: Connection, request: bytes, reply: bytes,
+                       slow: bool) -> None:
         delay = self.faults.plan.slow_s if slow else 0.0
         if self.wire_baud:
             characters = len(request) + fc.GAP_CHARACTERS + len(reply)

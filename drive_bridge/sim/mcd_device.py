@@ -1,7 +1,7 @@
 """The MCD Modbus Module as a simulated slave: functions 03 and 06 onto :class:`McdModel`."""
 
 import time
-from typing import Dict, Optional
+from typing import Any, Dict, Optional
 
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
@@ -35,6 +35,11 @@ class McdSimDevice:
             return rtu.exception_response(frame.unit, frame.function, error.code)
 
 
+def make_mcd_device(model: str, now_s: float, **settings: Any) -> McdSimDevice:
+    """Return a simulated MCD starter of ``model`` (settings go to its :class:`McdSimConfig`)."""
+    return McdSimDevice(McdModel(McdSimConfig(model=model, **settings), now_s))
+
+
 def make_mcd_server(models: Dict[int, str], wire=None, **settings) -> ModbusSimServer:
     """
     Return a simulated bus with one MCD per address: ``{20: 'mcd500', 21: 'mcd202'}``.
@@ -42,6 +47,5 @@ def make_mcd_server(models: Dict[int, str], wire=None, **settings) -> ModbusSimS
     ``settings`` go to every device's :class:`McdSimConfig` (e.g. ``start_time_s=0.5``).
     """
     now = time.monotonic()
-    devices = {unit: McdSimDevice(McdModel(McdSimConfig(model=model, **settings), now))
-               for unit, model in models.items()}
+    devices = {unit: make_mcd_device(model, now, **settings) for unit, model in models.items()}
     return ModbusSimServer(devices, wire=wire)

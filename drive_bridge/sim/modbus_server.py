@@ -8,12 +8,13 @@ exception codes and timing are exact, and faults can be injected. Standard libra
 With ``wire_baud`` set, each reply is held back until the request and the reply would
 have crossed a real wire at that baud rate, 3.5-character gap included, so a pty (which
 moves bytes instantly) behaves like a paced line for benchmarks.
+
+The endpoints and the serving thread are a :class:`~drive_bridge.sim.line_server.LineServer`,
+which hands each stream's bytes to :meth:`ModbusSimServer.take_bytes`; the server here
+frames them, picks the device, injects the faults and counts what the line carried.
 """
 
 from dataclasses import dataclass, field
-import os
-import selectors
-import socket
 import struct
 import threading
 import time
@@ -23,10 +24,9 @@ from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.sim.faults import (
     exception_reply, FaultInjector, mangle_rtu_reply, MBAP_FAULTS, MODBUS_FAULTS)
-from drive_bridge.sim.pty_link import PtyLink
+from drive_bridge.sim.line_server import Connection, LineServer
 
 GATEWAY_TARGET_FAILED = 0x0B  # Modbus exception: gateway target device failed to respond
-STALE_PARTIAL_FRAME_S = 0.05  # a partial frame older than this is dropped (pty has no gaps)
 
 
 class SimDevice(Protocol):
@@ -67,40 +67,6 @@ class WireTiming:
         return request_start_s + (request_len + reply_len) * self.char_s + gap
 
 
-class _Connection:
-    """One byte stream (pty master or TCP client) and its receive buffer."""
-
-    def __init__(self, fd_or_socket, framing: str):
-        self.io = fd_or_socket
-        self.framing = framing  # 'rtu' or 'mbap'
-        self.buffer = b''
-        self.first_byte_s = 0.0
-        self.last_byte_s = 0.0
-
-    def fileno(self) -> int:
-        return self.io if isinstance(self.io, int) else self.io.fileno()
-
-    def read(self) -> bytes:
-        if isinstance(self.io, int):
-            try:
-                return os.read(self.io, 4096)
-            except OSError:
-                return b''
-        try:
-            return self.io.recv(4096)
-        except OSError:
-            return b''
-
-    def write(self, data: bytes) -> None:
-        try:
-            if isinstance(self.io, int):
-                os.write(self.io, data)
-            else:
-                self.io.sendall(data)
-        except OSError:
-            pass
-
-
 class ModbusSimServer:
     """Serve several simulated devices on one simulated bus, on its own thread."""
 
@@ -116,59 +82,54 @@ class ModbusSimServer:
         self.faults = FaultInjector(MODBUS_FAULTS)
         # Optional fault hook: (unit, reply bytes) -> bytes to send instead, or None for silence.
         self.reply_hook: Optional[Callable[[int, bytes], Optional[bytes]]] = None
-        self.pty_path = ''
-        self.tcp_port = 0
-        self._selector = selectors.DefaultSelector()
-        self._listeners: Dict[int, tuple] = {}
-        self._ptys: List[PtyLink] = []
-        self._wake_r, self._wake_w = os.pipe()
-        self._selector.register(self._wake_r, selectors.EVENT_READ, None)
-        self._thread: Optional[threading.Thread] = None
-        self._running = False
-        self._loop_actions: List[tuple] = []
-        self._unplugged_links: List[str] = []
+        self.line = LineServer(self, clock)
 
-    # -- endpoints ----------------------------------------------------------------------
+    # -- the line: endpoints, its own faults, the thread (LineServer's) -----------------
+    @property
+    def pty_path(self) -> str:
+        """Return the path of the pty clients open ('' before :meth:`open_pty`)."""
+        return self.line.pty_path
+
+    @property
+    def tcp_port(self) -> int:
+        """Return the TCP port clients connect to (0 before :meth:`open_tcp`)."""
+        return self.line.tcp_port
+
+    @property
+    def pty_master(self) -> int:
+        """Return the pty's master end: bytes written there reach the client (line noise)."""
+        return self.line.pty_master
+
     def open_pty(self, link_path: str = '') -> str:
         """Open a pty pair, serve RTU on its master; return the slave's path for clients."""
-        pty = PtyLink(link_path)
-        self._ptys.append(pty)
-        self.pty_path = pty.path
-        self._selector.register(pty.master, selectors.EVENT_READ,
-                                _Connection(pty.master, 'rtu'))
-        return self.pty_path
+        return self.line.open_pty(link_path)
 
     def open_tcp(self, host: str = '127.0.0.1', port: int = 0, framing: str = 'mbap') -> int:
         """Listen for TCP clients; ``framing`` 'mbap' (Modbus TCP) or 'rtu' (RTU over TCP)."""
-        if framing not in ('mbap', 'rtu'):
-            raise ValueError(f'framing must be mbap or rtu, not {framing!r}')
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((host, port))
-        listener.listen(8)
-        listener.setblocking(False)
-        self._selector.register(listener, selectors.EVENT_READ, ('listen', framing))
-        self.tcp_port = listener.getsockname()[1]
-        self._listeners[listener.fileno()] = (listener, framing)
-        return self.tcp_port
+        return self.line.open_tcp(host, port, framing)
 
-    # -- faults of the line itself ------------------------------------------------------
     def unplug(self) -> None:
         """Close every pty, as a USB adapter pulled out: the port and its symlink vanish."""
-        self._in_loop(self._close_ptys)
+        self.line.unplug()
 
     def replug(self) -> str:
         """Open a new pty at the same symlink after :meth:`unplug`; return the new path."""
-        links = self._unplugged_links
-        self._unplugged_links = []
-        for link in links or ['']:
-            self._in_loop(lambda link=link: self.open_pty(link))
-        return self.pty_path
+        return self.line.replug()
 
     def close_tcp(self) -> None:
         """Close the TCP listeners and every client connection, as a gateway restarting."""
-        self._in_loop(self._close_sockets)
+        self.line.close_tcp()
 
+    def start(self) -> 'ModbusSimServer':
+        """Serve on a background thread."""
+        self.line.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop serving and close every endpoint."""
+        self.line.stop()
+
+    # -- the devices --------------------------------------------------------------------
     def power_off(self, unit: int) -> None:
         """Switch a device off: it stays silent until :meth:`power_on`."""
         with self.lock:
@@ -180,109 +141,9 @@ class ModbusSimServer:
             self.devices[unit] = device
             self.silent_units.discard(unit)
 
-    def _in_loop(self, action: Callable[[], None]) -> None:
-        """Run ``action`` on the serving thread (the selector is not shared) and wait."""
-        if self._thread is None or not self._thread.is_alive():
-            action()
-            return
-        done = threading.Event()
-        self._loop_actions.append((action, done))
-        os.write(self._wake_w, b'x')
-        done.wait(5.0)
-
-    def _close_ptys(self) -> None:
-        for pty in self._ptys:
-            self._forget(pty.master)
-            self._unplugged_links.append(pty.link_path)
-            pty.close()
-        self._ptys = []
-
-    def _close_sockets(self) -> None:
-        for key in list(self._selector.get_map().values()):
-            if isinstance(key.fileobj, socket.socket):
-                self._close_key(key)
-        self._listeners.clear()
-
-    def _forget(self, fileobj) -> bool:
-        """Stop watching ``fileobj``; return False if it was not watched."""
-        try:
-            self._selector.unregister(fileobj)
-        except (KeyError, ValueError):
-            return False
-        return True
-
-    # -- thread -------------------------------------------------------------------------
-    def start(self) -> 'ModbusSimServer':
-        """Serve on a background thread."""
-        self._running = True
-        self._thread = threading.Thread(target=self._serve, name='modbus-sim', daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        """Stop serving and close every endpoint."""
-        self._running = False
-        os.write(self._wake_w, b'x')
-        if self._thread:
-            self._thread.join(timeout=5)
-        for key in list(self._selector.get_map().values()):
-            self._close_key(key)
-        for pty in self._ptys:
-            pty.close()
-        os.close(self._wake_w)
-
-    def _close_key(self, key) -> None:
-        if not self._forget(key.fileobj):
-            return
-        if isinstance(key.fileobj, socket.socket):
-            key.fileobj.close()
-        elif key.fileobj == self._wake_r:
-            os.close(self._wake_r)
-
-    def _serve(self) -> None:
-        while self._running:
-            while self._loop_actions:
-                action, done = self._loop_actions.pop(0)
-                action()
-                done.set()
-            events = self._selector.select(timeout=0.005)
-            now = self.clock()
-            for key, _ in events:
-                self._on_readable(key, now)
-            self._flush_stale(now)
-
-    def _on_readable(self, key, now: float) -> None:
-        if key.data is None:
-            os.read(self._wake_r, 64)
-            return
-        if isinstance(key.data, tuple):
-            client, _ = key.fileobj.accept()
-            client.setblocking(True)
-            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._selector.register(client, selectors.EVENT_READ,
-                                    _Connection(client, key.data[1]))
-            return
-        connection: _Connection = key.data
-        data = connection.read()
-        if not data:
-            if isinstance(connection.io, socket.socket):
-                self._close_key(key)
-            return
-        if not connection.buffer:
-            connection.first_byte_s = now
-        connection.buffer += data
-        connection.last_byte_s = now
-        self._process(connection, gap_elapsed=False)
-
-    def _flush_stale(self, now: float) -> None:
-        for key in list(self._selector.get_map().values()):
-            connection = key.data
-            if isinstance(connection, _Connection) and connection.buffer and \
-                    now - connection.last_byte_s > STALE_PARTIAL_FRAME_S:
-                self._process(connection, gap_elapsed=True)
-
     # -- framing ------------------------------------------------------------------------
-    def _process(self, connection: _Connection, gap_elapsed: bool) -> None:
+    def take_bytes(self, connection: Connection, gap_elapsed: bool) -> None:
+        """Answer the whole frames in ``connection``'s buffer (the line's StreamHandler)."""
         if connection.framing == 'mbap':
             self._process_mbap(connection)
             return
@@ -317,7 +178,7 @@ class ModbusSimServer:
             return None
         return self.faults.draw(frame.unit, usable)
 
-    def _send_rtu(self, connection: _Connection, request: bytes, reply: bytes,
+    def _send_rtu(self, connection: Connection, request: bytes, reply: bytes,
                   slow: bool = False) -> None:
         delay = self.faults.plan.slow_s if slow else 0.0
         if self.wire is not None:
@@ -327,7 +188,7 @@ class ModbusSimServer:
             time.sleep(delay)
         connection.write(reply)
 
-    def _process_mbap(self, connection: _Connection) -> None:
+    def _process_mbap(self, connection: Connection) -> None:
         while len(connection.buffer) >= 7:
             transaction, protocol, length = struct.unpack('>HHH', connection.buffer[:6])
             if protocol != 0 or not 2 <= length <= 254:

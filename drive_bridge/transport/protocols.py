@@ -1,10 +1,13 @@
 """
-The protocol table: every bus protocol, its link, framing, request types and transport.
+The protocol table: every bus protocol, its link, framing, request types and settings.
 
 This is the one place that names the protocols. Configuration (which protocols exist, their
 defaults and their own settings), the link settings (serial or TCP, framing), the node and
-the tools all read it. A new protocol is a codec in :mod:`drive_bridge.protocol`, a
-transport module here, and one entry in :data:`PROTOCOLS`.
+the tools all read it. It imports no transport (the transports read the link settings,
+which read this table): which transport carries a protocol is the transport registry's
+entry (:mod:`drive_bridge.transport.engines`). A new protocol is a codec in
+:mod:`drive_bridge.protocol`, a transport module here, one entry in :data:`PROTOCOLS` and
+its factory in ``engines.TRANSPORTS``.
 """
 
 from dataclasses import dataclass
@@ -26,15 +29,13 @@ class ProtocolSpec:
     the protocol always uses, whatever is configured (AP ASCII: 8N1). ``default_stopbits``
     gives the stop bits for ``stopbits: 0`` from the parity; ``frame_gap_s`` the silence a
     master keeps between transactions (baud rate, parity, stop bits). ``settings``: the bus
-    settings only this protocol takes. ``make_transport(link, options)`` builds the
-    transport from the link settings and the validated options (bus settings by name).
+    settings only this protocol takes.
     """
 
     name: str
     description: str
     link: str
     requests: Tuple[type, ...]
-    make_transport: Callable[[Any, Mapping[str, Any]], Any]
     fixed_framing: Optional[Tuple[str, int]] = None
     default_stopbits: Callable[[str], int] = rtu.default_stopbits
     frame_gap_s: Callable[[int, str, int], float] = rtu.frame_gap_s
@@ -49,39 +50,15 @@ class ProtocolSpec:
         return self.link == 'serial'
 
 
-def _modbus_rtu(link, options: Mapping[str, Any]):
-    if options.get('serial_engine', 'native') == 'pymodbus':
-        from drive_bridge.transport.modbus import ModbusTransport
-        return ModbusTransport(link)
-    from drive_bridge.transport.serial_rtu import RtuSerialTransport
-    return RtuSerialTransport(link)
-
-
-def _pymodbus(link, options: Mapping[str, Any]):
-    from drive_bridge.transport.modbus import ModbusTransport
-    return ModbusTransport(link)
-
-
-def _fc_protocol(link, options: Mapping[str, Any]):
-    from drive_bridge.transport.fc_protocol import FcProtocolTransport
-    return FcProtocolTransport(link, options.get('address_format', fc_telegram.ADDRESS_FORMAT_126))
-
-
-def _ap_ascii(link, options: Mapping[str, Any]):
-    from drive_bridge.transport.ap_ascii import ApAsciiTransport
-    return ApAsciiTransport(link, options.get('ap_nak_retries', 2),
-                            options.get('ap_address_lrc_eot', True))
-
-
 PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
     ProtocolSpec(
-        'modbus_rtu', 'Modbus RTU on a serial port', 'serial', MODBUS_REQUESTS, _modbus_rtu,
+        'modbus_rtu', 'Modbus RTU on a serial port', 'serial', MODBUS_REQUESTS,
         settings=(Setting('serial_engine', str, 'native',
                           'Modbus RTU on a serial port: native (reads replies by their '
                           'length) or pymodbus', choices=SERIAL_ENGINES),)),
     ProtocolSpec(
         'ap_ascii', 'MCD AP ASCII on a serial port (8N1)', 'serial', AP_ASCII_REQUESTS,
-        _ap_ascii, fixed_framing=('N', 1), default_stopbits=lambda parity: 1,
+        fixed_framing=('N', 1), default_stopbits=lambda parity: 1,
         min_timeout_s=ap_ascii.MIN_TIMEOUT_S,
         settings=(
             Setting('ap_nak_retries', int, 2,
@@ -93,7 +70,7 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
     ProtocolSpec(
         'fc_protocol', 'the Danfoss FC protocol on a serial port (VLT 5000/6000 par. 500, '
         'FC 51 par. 8-30; 8E1 by default)', 'serial', (fc_telegram.FcTelegramRequest,),
-        _fc_protocol, default_stopbits=lambda parity: fc_telegram.DEFAULT_STOPBITS,
+        default_stopbits=lambda parity: fc_telegram.DEFAULT_STOPBITS,
         frame_gap_s=lambda baudrate, parity, stopbits: fc_telegram.GAP_CHARACTERS *
         rtu.character_time_s(baudrate, parity, stopbits),
         address_range=lambda options: (1, 31) if options.get('address_format') ==
@@ -102,10 +79,10 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
                           'FC protocol: the address byte format the drives expect (1-126: '
                           'addresses 1-126, the FC series; 1-31: addresses 1-31)',
                           choices=fc_telegram.ADDRESS_FORMATS),)),
-    ProtocolSpec('modbus_tcp', 'Modbus TCP gateway', 'tcp', MODBUS_REQUESTS, _pymodbus,
+    ProtocolSpec('modbus_tcp', 'Modbus TCP gateway', 'tcp', MODBUS_REQUESTS,
                  frame_gap_s=lambda baudrate, parity, stopbits: 0.0),
     ProtocolSpec('rtu_over_tcp', 'transparent serial-to-Ethernet gateway (Modbus RTU frames)',
-                 'tcp', MODBUS_REQUESTS, _pymodbus,
+                 'tcp', MODBUS_REQUESTS,
                  frame_gap_s=lambda baudrate, parity, stopbits: 0.0),
 )}
 
@@ -117,8 +94,3 @@ def protocol_settings() -> Tuple[Setting, ...]:
         for setting in spec.settings:
             seen.setdefault(setting.name, setting)
     return tuple(seen.values())
-
-
-def make_transport(link, options: Optional[Mapping[str, Any]] = None):
-    """Return the transport of ``link`` (LinkSettings) with the protocol's ``options``."""
-    return PROTOCOLS[link.protocol].make_transport(link, options or {})

@@ -5,8 +5,9 @@ import time
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import CommandRefused
+from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
-from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
+from drive_bridge.transport.protocols import SERIAL_ENGINES
 from fakes import kind, message
 from integration_helpers import wait_until
 import pytest

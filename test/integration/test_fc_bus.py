@@ -9,8 +9,9 @@ from drive_bridge.protocol import words
 from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.sim.devices import make_sim_server
+from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
-from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
+from drive_bridge.transport.protocols import SERIAL_ENGINES
 from integration_helpers import wait_until
 import pytest
 

@@ -1,7 +1,7 @@
 """Twenty reconnect cycles in a row per drill: unplugged adapter, power cycle, gateway restart."""
 
-from drive_bridge.tools.reconnect import DRILLS, run_drill
 import pytest
+from reconnect_drill import DRILLS, run_drill
 
 
 @pytest.mark.parametrize('drill', DRILLS)

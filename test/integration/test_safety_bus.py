@@ -17,9 +17,9 @@ from drive_bridge.protocol import fc_telegram as fc
 from drive_bridge.protocol.requests import AsciiRequest, ReadRegisters
 from drive_bridge.sim.mcd_device import make_mcd_server
 from drive_bridge.sim.pty_link import PtyLink
+from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.fc_protocol import FcProtocolTransport
 from drive_bridge.transport.link import LinkSettings
-from drive_bridge.transport.protocols import make_transport
 import pytest
 from safety_helpers import Babbler, MCD_START, McdProbe, sim_pty_master, spy_starts, wait_for
 

@@ -5,15 +5,15 @@ The soak and its oracle (bench/soak.py runs 100,000 transactions).
   and counts every injected fault by kind.
 - On the virtual line (deterministic for a seed, whatever the machine's load) the unbroken
   bridge gives no violation, and each deliberately broken bridge
-  (:mod:`drive_bridge.tools.soak_broken`) is caught: the proof that the audit is an oracle.
+  (:mod:`soak_harness.broken`) is caught: the proof that the audit is an oracle.
 - Two bugs the oracle found (fixed), each as a scripted test.
 """
 
 from drive_bridge.sim.mcd_model import STARTING
-from drive_bridge.tools.soak import (
-    COUNTED_AS, run_soak, SoakRun, SoakSettings, transport_class)
-from drive_bridge.tools.soak_broken import broken, EXPECTED_KINDS, VARIANTS
 import pytest
+from soak_harness.broken import broken, EXPECTED_KINDS, VARIANTS
+from soak_harness.runner import (
+    COUNTED_AS, run_soak, SoakRun, SoakSettings, transport_class)
 
 # The virtual soak of the catch tests: 10,000 transactions, about 3 minutes of line time
 # with outages and trips, 1-2 s of CPU.

@@ -15,9 +15,10 @@ from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.sim.mcd_device import make_mcd_server as make_server
 from drive_bridge.transport import serial_port
+from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.link import PortFraming
 from drive_bridge.transport.modbus import LinkSettings
-from drive_bridge.transport.protocols import make_transport, SERIAL_ENGINES
+from drive_bridge.transport.protocols import SERIAL_ENGINES
 from drive_bridge.transport.serial_port import direct_descriptor
 import pytest
 import serial

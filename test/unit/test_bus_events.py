@@ -7,9 +7,9 @@ from drive_bridge.bus.events import (
     StateUnknown)
 from drive_bridge.devices.contracts import DeviceReading
 from drive_bridge.errors import DeviceException, NoResponse
-from drive_bridge.tools import soak
 from fakes import run_for
 import pytest
+from soak_harness import runner as soak
 from test_bus_master import make_bus
 
 READING = DeviceReading(state='ready', status_word=0x0201)

@@ -14,7 +14,8 @@ from drive_bridge.protocol.fc_control import StatusWord
 from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.sim.fc_device import FcSimDevice
-from drive_bridge.sim.fc_model import FcModel, FcSimConfig, ParameterError
+from drive_bridge.sim.fc_model import FcModel, FcSimConfig
+from drive_bridge.sim.fc_parameter_store import ParameterError
 from fakes import drive_cycle, FakeClock
 import pytest
 

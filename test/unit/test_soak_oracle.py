@@ -1,8 +1,8 @@
 """The soak oracle's rules on hand-made records (the catch tests run it on real soaks)."""
 
 from drive_bridge.protocol.lvsg import Control
-from drive_bridge.tools.soak_line import ControlWrite, drive_label, lvsg_label, WireFrame
-from drive_bridge.tools.soak_oracle import (
+from soak_harness.line import ControlWrite, drive_label, lvsg_label, WireFrame
+from soak_harness.oracle import (
     ACKNOWLEDGED, ClientLog, DeviceInfo, NOT_SENT, Oracle, outcome_of_reply, UNACKNOWLEDGED)
 
 FAN = DeviceInfo('fan', 2, 'drive', reference_pct=25.0)

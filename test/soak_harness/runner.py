@@ -11,12 +11,12 @@ invalid) and commands at the monitor-only and the dead device through the bus ma
 the ROS node does, and records what it asked and what it was told. At the end the faults
 stop and the bridge stops everything (the shutdown's stop of every motor).
 
-The oracle (:mod:`drive_bridge.tools.soak_oracle`) then checks the safety invariants from the
+The oracle (:mod:`soak_harness.oracle`) then checks the safety invariants from the
 line's log (what each device received and executed) and the driver's record alone; the fault
 counts by kind are compared with the bus statistics. Figures: :class:`SoakReport`.
 
 The line is a pty with the bridge's serial transport in real time, or a virtual line on a
-virtual clock (:mod:`drive_bridge.tools.soak_line`): the same seed gives the same run, however
+virtual clock (:mod:`soak_harness.line`): the same seed gives the same run, however
 loaded the machine. No ROS: the bus master runs in the driver's thread (``run_once``), so
 the driver's record of every answer is exact. The node tier is ``test/soak_node.py``.
 """
@@ -41,10 +41,10 @@ from drive_bridge.sim.faults import FaultPlan, MODBUS_FAULTS
 from drive_bridge.sim.fc_model import ALARM_OVER_CURRENT, TIMEOUT_STOP
 from drive_bridge.sim.lvsg_gateway import LvsgGatewaySim, LvsgSlave
 from drive_bridge.sim.mcd_model import McdModel, McdSimConfig, RUNNING, STARTING
-from drive_bridge.tools.soak_line import RecordingServer, VirtualClock, VirtualLine
-from drive_bridge.tools.soak_oracle import (
-    ClientLog, DeviceInfo, Oracle, summarize, Violation, VIOLATION_KINDS)
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
+from soak_harness.line import RecordingServer, VirtualClock, VirtualLine
+from soak_harness.oracle import (
+    ClientLog, DeviceInfo, Oracle, summarize, Violation, VIOLATION_KINDS)
 
 # Injected fault kind -> the bus statistics' failure kind it must be counted as.
 COUNTED_AS = {'crc': 'crc', 'no_reply': 'timeout', 'slow': 'slow', 'exception': 'exception',

@@ -2,7 +2,7 @@
 The soak's oracle: the bridge's safety invariants checked from the outside.
 
 Two records and nothing else: what each simulated device received and executed, in line
-order (:class:`~drive_bridge.tools.soak_line.WireFrame`), and the client's own record of what
+order (:class:`~soak_harness.line.WireFrame`), and the client's own record of what
 it asked and what it was told (:class:`ClientLog`: commands and their answers, speed
 references, and what the bridge reported about a device: offline, online, tripped). Nothing
 of the bridge's own state is read. Every record carries the *line sequence* at the moment it
@@ -52,7 +52,7 @@ from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 from drive_bridge.errors import CommandRefused
 from drive_bridge.protocol import fc_scaling
-from drive_bridge.tools.soak_line import WireFrame
+from soak_harness.line import WireFrame
 
 ACKNOWLEDGED = 'acknowledged'
 UNACKNOWLEDGED = 'unacknowledged'  # sent; no valid acknowledgement: it may have run

@@ -234,7 +234,7 @@ class RecordingServer(ModbusSimServer):
         """Return the number of requests the line carried so far."""
         return len(self.frames)
 
-    def _process(self, connection, gap_elapsed: bool) -> None:
+    def take_bytes(self, connection, gap_elapsed: bool) -> None:
         """
         Take what one read brought; mark a backlog.
 
@@ -243,7 +243,7 @@ class RecordingServer(ModbusSimServer):
         loaded machine) and took them late, so their place on the line is uncertain.
         """
         first = len(self.frames)
-        super()._process(connection, gap_elapsed)
+        super().take_bytes(connection, gap_elapsed)
         if len(self.frames) - first > 1:
             with self.lock:
                 self.frames[first:] = [replace(frame, late=True)

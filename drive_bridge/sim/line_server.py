@@ -1,0 +1,226 @@
+"""
+The byte streams of one simulated line, served on their own thread.
+
+A pty (RTU on a serial port) and TCP clients (Modbus TCP, RTU over TCP, raw FC protocol):
+:class:`LineServer` watches them with one selector, keeps each stream's receive buffer in
+a :class:`Connection`, and hands a connection to its :class:`StreamHandler` whenever bytes
+arrive or a partial frame has gone quiet. Framing and answering are the handler's (the
+Modbus and FC protocol servers); the line's own faults (an unplugged adapter, a gateway
+restart) are here. Standard library only.
+"""
+
+import os
+import selectors
+import socket
+import threading
+import time
+from typing import Callable, List, Optional, Protocol, Union
+
+from drive_bridge.sim.pty_link import PtyLink
+
+STALE_PARTIAL_FRAME_S = 0.05  # a partial frame older than this is dropped (pty has no gaps)
+FRAMINGS = ('mbap', 'rtu')  # Modbus TCP's MBAP header, or the bytes as on a serial line
+
+
+class Connection:
+    """One byte stream (pty master or TCP client) and its receive buffer."""
+
+    def __init__(self, fd_or_socket: Union[int, socket.socket], framing: str):
+        self.io = fd_or_socket
+        self.framing = framing  # 'rtu' or 'mbap'
+        self.buffer = b''
+        self.first_byte_s = 0.0  # when the buffer's first byte arrived
+        self.last_byte_s = 0.0
+
+    def fileno(self) -> int:
+        """Return the stream's file descriptor."""
+        return self.io if isinstance(self.io, int) else self.io.fileno()
+
+    def read(self) -> bytes:
+        """Return what the stream has (b'' when it is closed or failed)."""
+        try:
+            return os.read(self.io, 4096) if isinstance(self.io, int) else self.io.recv(4096)
+        except OSError:
+            return b''
+
+    def write(self, data: bytes) -> None:
+        """Send ``data``; a stream that has gone is ignored (the master sees silence)."""
+        try:
+            if isinstance(self.io, int):
+                os.write(self.io, data)
+            else:
+                self.io.sendall(data)
+        except OSError:
+            pass
+
+
+class StreamHandler(Protocol):
+    """What the line hands its bytes to: the framing and answering of one protocol."""
+
+    def take_bytes(self, connection: Connection, gap_elapsed: bool) -> None:
+        """
+        Consume what ``connection.buffer`` holds (on the serving thread).
+
+        ``gap_elapsed``: no byte came for :data:`STALE_PARTIAL_FRAME_S`, so a partial frame
+        left in the buffer will not be completed.
+        """
+
+
+class LineServer:
+    """The endpoints of one simulated line and the thread that serves them."""
+
+    def __init__(self, handler: StreamHandler, clock: Callable[[], float] = time.monotonic):
+        self.handler = handler
+        self.clock = clock
+        self.pty_path = ''
+        self.tcp_port = 0
+        self._selector = selectors.DefaultSelector()
+        self._ptys: List[PtyLink] = []
+        self._wake_r, self._wake_w = os.pipe()
+        self._selector.register(self._wake_r, selectors.EVENT_READ, None)
+        self._thread: Optional[threading.Thread] = None
+        self._running = False
+        self._loop_actions: List[tuple] = []
+        self._unplugged_links: List[str] = []
+
+    # -- endpoints ----------------------------------------------------------------------
+    def open_pty(self, link_path: str = '') -> str:
+        """Open a pty pair, serve RTU on its master; return the slave's path for clients."""
+        pty = PtyLink(link_path)
+        self._ptys.append(pty)
+        self.pty_path = pty.path
+        self._selector.register(pty.master, selectors.EVENT_READ, Connection(pty.master, 'rtu'))
+        return self.pty_path
+
+    @property
+    def pty_master(self) -> int:
+        """Return the master end of the newest pty: bytes written there reach the client."""
+        return self._ptys[-1].master
+
+    def open_tcp(self, host: str = '127.0.0.1', port: int = 0, framing: str = 'mbap') -> int:
+        """Listen for TCP clients; ``framing`` 'mbap' (Modbus TCP) or 'rtu' (RTU over TCP)."""
+        if framing not in FRAMINGS:
+            raise ValueError(f'framing must be mbap or rtu, not {framing!r}')
+        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind((host, port))
+        listener.listen(8)
+        listener.setblocking(False)
+        self._selector.register(listener, selectors.EVENT_READ, ('listen', framing))
+        self.tcp_port = listener.getsockname()[1]
+        return self.tcp_port
+
+    # -- faults of the line itself ------------------------------------------------------
+    def unplug(self) -> None:
+        """Close every pty, as a USB adapter pulled out: the port and its symlink vanish."""
+        self._in_loop(self._close_ptys)
+
+    def replug(self) -> str:
+        """Open a new pty at the same symlink after :meth:`unplug`; return the new path."""
+        links = self._unplugged_links
+        self._unplugged_links = []
+        for link in links or ['']:
+            self._in_loop(lambda link=link: self.open_pty(link))
+        return self.pty_path
+
+    def close_tcp(self) -> None:
+        """Close the TCP listeners and every client connection, as a gateway restarting."""
+        self._in_loop(self._close_sockets)
+
+    def _in_loop(self, action: Callable[[], None]) -> None:
+        """Run ``action`` on the serving thread (the selector is not shared) and wait."""
+        if self._thread is None or not self._thread.is_alive():
+            action()
+            return
+        done = threading.Event()
+        self._loop_actions.append((action, done))
+        os.write(self._wake_w, b'x')
+        done.wait(5.0)
+
+    def _close_ptys(self) -> None:
+        for pty in self._ptys:
+            self._forget(pty.master)
+            self._unplugged_links.append(pty.link_path)
+            pty.close()
+        self._ptys = []
+
+    def _close_sockets(self) -> None:
+        for key in list(self._selector.get_map().values()):
+            if isinstance(key.fileobj, socket.socket):
+                self._close_key(key)
+
+    def _forget(self, fileobj) -> bool:
+        """Stop watching ``fileobj``; return False if it was not watched."""
+        try:
+            self._selector.unregister(fileobj)
+        except (KeyError, ValueError):
+            return False
+        return True
+
+    # -- thread -------------------------------------------------------------------------
+    def start(self) -> None:
+        """Serve on a background thread."""
+        self._running = True
+        self._thread = threading.Thread(target=self._serve, name='modbus-sim', daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop serving and close every endpoint."""
+        self._running = False
+        os.write(self._wake_w, b'x')
+        if self._thread:
+            self._thread.join(timeout=5)
+        for key in list(self._selector.get_map().values()):
+            self._close_key(key)
+        for pty in self._ptys:
+            pty.close()
+        os.close(self._wake_w)
+
+    def _close_key(self, key) -> None:
+        if not self._forget(key.fileobj):
+            return
+        if isinstance(key.fileobj, socket.socket):
+            key.fileobj.close()
+        elif key.fileobj == self._wake_r:
+            os.close(self._wake_r)
+
+    def _serve(self) -> None:
+        while self._running:
+            while self._loop_actions:
+                action, done = self._loop_actions.pop(0)
+                action()
+                done.set()
+            events = self._selector.select(timeout=0.005)
+            now = self.clock()
+            for key, _ in events:
+                self._on_readable(key, now)
+            self._flush_stale(now)
+
+    def _on_readable(self, key, now: float) -> None:
+        if key.data is None:
+            os.read(self._wake_r, 64)
+            return
+        if isinstance(key.data, tuple):
+            client, _ = key.fileobj.accept()
+            client.setblocking(True)
+            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._selector.register(client, selectors.EVENT_READ, Connection(client, key.data[1]))
+            return
+        connection: Connection = key.data
+        data = connection.read()
+        if not data:
+            if isinstance(connection.io, socket.socket):
+                self._close_key(key)
+            return
+        if not connection.buffer:
+            connection.first_byte_s = now
+        connection.buffer += data
+        connection.last_byte_s = now
+        self.handler.take_bytes(connection, gap_elapsed=False)
+
+    def _flush_stale(self, now: float) -> None:
+        for key in list(self._selector.get_map().values()):
+            connection = key.data
+            if isinstance(connection, Connection) and connection.buffer and \
+                    now - connection.last_byte_s > STALE_PARTIAL_FRAME_S:
+                self.handler.take_bytes(connection, gap_elapsed=True)

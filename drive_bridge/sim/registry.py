@@ -1,0 +1,37 @@
+"""
+Every family's simulator: the one sim-side registry entry of a device family.
+
+The device families (:mod:`drive_bridge.devices.registry`) know nothing of their simulators:
+the simulators import the families' maps, never the reverse (the import contract in
+``.importlinter`` checks it). A family's simulator is a model (behaviour, explicit time) with
+its Modbus face and an entry here: the family's name, the models it simulates and the factory
+``make_device(model, now_s, **settings)`` (settings go to the model's config).
+"""
+
+from dataclasses import dataclass
+from typing import Callable, Dict, Tuple
+
+from drive_bridge.devices import fc, mcd, vlt
+from drive_bridge.sim.fc_device import make_drive_device
+from drive_bridge.sim.mcd_device import make_mcd_device
+from drive_bridge.sim.modbus_server import SimDevice
+
+
+@dataclass(frozen=True)
+class Simulator:
+    """One device family's simulator: its models and the factory of one simulated device."""
+
+    family: str  # the name in drive_bridge.devices.registry.FAMILIES
+    models: Tuple[str, ...]
+    make_device: Callable[..., SimDevice]  # (model, now_s, **settings) -> a Modbus face
+
+
+SIMULATORS: Dict[str, Simulator] = {entry.family: entry for entry in (
+    Simulator(mcd.FAMILY, tuple(mcd.MODEL_FEATURES), make_mcd_device),
+    Simulator(fc.FAMILY, ('fc51',), make_drive_device),
+    Simulator(vlt.FAMILY, vlt.MODELS, make_drive_device),
+)}
+
+# model name -> family name, for every simulated model.
+SIM_MODELS: Dict[str, str] = {model: entry.family for entry in SIMULATORS.values()
+                              for model in entry.models}

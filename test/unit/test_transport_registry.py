@@ -1,0 +1,29 @@
+"""The transport registry: one factory per protocol in the protocol table, and which it builds."""
+
+from drive_bridge.transport.ap_ascii import ApAsciiTransport
+from drive_bridge.transport.engines import make_transport, TRANSPORTS
+from drive_bridge.transport.fc_protocol import FcProtocolTransport
+from drive_bridge.transport.link import LinkSettings
+from drive_bridge.transport.modbus import ModbusTransport
+from drive_bridge.transport.protocols import PROTOCOLS
+from drive_bridge.transport.serial_rtu import RtuSerialTransport
+import pytest
+
+
+def test_every_protocol_has_its_transport_factory_and_nothing_else_has_one():
+    assert set(TRANSPORTS) == set(PROTOCOLS)
+
+
+@pytest.mark.parametrize('protocol, options, expected', [
+    ('modbus_rtu', {}, RtuSerialTransport),
+    ('modbus_rtu', {'serial_engine': 'native'}, RtuSerialTransport),
+    ('modbus_rtu', {'serial_engine': 'pymodbus'}, ModbusTransport),
+    ('ap_ascii', {}, ApAsciiTransport),
+    ('fc_protocol', {}, FcProtocolTransport),
+    ('modbus_tcp', {}, ModbusTransport),
+    ('rtu_over_tcp', {}, ModbusTransport),
+])
+def test_the_transport_of_each_protocol_is_built_without_opening_the_link(
+        protocol, options, expected):
+    link = LinkSettings(protocol=protocol, port='/nonexistent/ttyNONE', tcp_port=1)
+    assert type(make_transport(link, options)) is expected
