@@ -7,7 +7,7 @@ of :data:`drive_bridge.tools.soak_broken.VARIANTS`. Never run it against real eq
 
 import sys
 
-from drive_bridge.ros import node
+from drive_bridge.ros import process
 from drive_bridge.tools.soak_broken import broken
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
 
@@ -16,7 +16,7 @@ def main() -> int:
     """Break the bridge as the first argument says, then run the node with the rest."""
     variant = sys.argv.pop(1)
     with broken(variant, RtuSerialTransport):
-        return node.main(sys.argv)
+        return process.main(sys.argv)
 
 
 if __name__ == '__main__':
