@@ -187,9 +187,8 @@ class DriveBridgeNode(LifecycleNode):
     # -- parameters and diagnostics (executor thread) -------------------------------------
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         session = self._session
-        joints = session.joints if session is not None else None
         return self._settings.on_set(parameters, self._gate.bus,
-                                     joints.bridge if joints is not None else None)
+                                     session.joint_bridge if session is not None else None)
 
     def _on_diagnostics_timer(self) -> None:
         self._calls.wake()  # answer calls the bus left waiting too long
@@ -199,7 +198,5 @@ class DriveBridgeNode(LifecycleNode):
         session, bus = self._session, self._gate.bus
         if session is None or bus is None:
             return None
-        joints = session.joints
         return DiagnosticSources(bus, session.config.link.describe(), self._gate.active,
-                                 self._settings.changes_in_words,
-                                 joints.bridge if joints is not None else None)
+                                 self._settings.changes_in_words, session.joint_bridge)

@@ -4,9 +4,10 @@ The node's process: ``main``, the executor's thread, autostart and the exit sign
 SIGINT, SIGTERM and SIGHUP are blocked in every thread (:mod:`drive_bridge.ros.exit_signals`)
 and taken by the main thread: the first one stops every motor that may run because of the
 node, then the node exits; more signals meanwhile change nothing. The executor spins on a
-thread of its own meanwhile, so services answer (refused) and stops are taken while the
-main thread shuts the bus down. Run it through :mod:`drive_bridge.ros.entry`, which blocks
-the signals before this module's imports start any thread.
+thread of its own, so while the main thread stops the motors and closes the bus, calls are
+still answered (refused: the bus is closing) and waiting ones are refused. Run it through
+:mod:`drive_bridge.ros.entry`, which blocks the signals before this module's imports start
+any thread.
 """
 
 import signal

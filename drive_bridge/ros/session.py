@@ -59,6 +59,12 @@ class BusSession:
             self.joints = joints.attach(node, self.bus, self.config.devices,
                                         paths.gate.is_active, paths.inputs)
 
+    @property
+    def joint_bridge(self) -> Optional[joints.JointBridge]:
+        """Return the joints' bridge, or None without joints."""
+        interface = self.joints
+        return interface.bridge if interface is not None else None
+
     def start(self) -> None:
         """Start the bus thread: reading begins."""
         self.bus.start()

@@ -44,8 +44,6 @@ from drive_bridge.ros.command_inputs import (  # noqa: F401 - part of this packa
     JOINT_COMMANDS_QOS as COMMANDS_QOS, JOINT_COMMANDS_TOPIC as COMMANDS_TOPIC)
 from drive_bridge.ros.joints.auto_start import AutoStart, DriveFacts  # noqa: F401
 from drive_bridge.ros.joints.bridge import JointBridge  # noqa: F401
-from drive_bridge.ros.joints.commands import LOG_PERIOD_S  # noqa: F401
 from drive_bridge.ros.joints.interface import (  # noqa: F401
     attach, JointInterface, stamp_offset_ns, STATES_QOS, STATES_TOPIC)
 from drive_bridge.ros.joints.model import Integrator, joint_specs, JointSpec  # noqa: F401
-from drive_bridge.ros.joints.values import RECENT_S  # noqa: F401
