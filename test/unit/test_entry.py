@@ -1,6 +1,5 @@
 """The node's entry point blocks the exit signals before anything can start a thread."""
 
-import os
 import signal
 import subprocess
 import sys
