@@ -13,7 +13,8 @@ fixed window (see ``node_cpu.py``), in four cases:
 - ``states only``: joints, the client subscribed, no commands;
 - ``commands, per joint``: 100 Hz commands, one JointState per reading (the node's way);
 - ``commands, batched``: 100 Hz commands, one JointState per round of the 8 joints
-  (``drive_bridge.ros.joints.BATCH_STATES``, set by this bench in the node process).
+  (``drive_bridge.ros.joints.interface.BATCH_STATES``, set by this bench in the node
+  process).
 
 Also printed: the bus transactions per second (the pacer's frame log): 100 Hz commands
 must not add any. Each case is run several times, in turn; the table gives the median and
@@ -43,8 +44,9 @@ from std_srvs.srv import Trigger  # noqa: E402
 JOINTS = 8
 SCALE = 20.0
 WARM_UP_S = 2.0
-NODE_MAIN = ('import sys, drive_bridge.ros.joints as joints; joints.BATCH_STATES = {batch}; '
-             'from drive_bridge.ros.node import main; sys.exit(main())')
+NODE_MAIN = ('import sys, drive_bridge.ros.joints.interface as joints; '
+             'joints.BATCH_STATES = {batch}; '
+             'from drive_bridge.ros.process import main; sys.exit(main())')
 
 
 def devices(joints: bool) -> Dict[str, Dict]:

@@ -109,7 +109,7 @@ JOINT_SETTINGS: Tuple[Setting, ...] = (
 )
 REFERENCE_SETTINGS: Tuple[Setting, ...] = SPEED_REFERENCE_SETTINGS + JOINT_SETTINGS
 # The node's own settings (not the bus's): a parameters file may hold them; declared by
-# drive_bridge.ros.node.
+# drive_bridge.ros.parameters.
 NODE_SETTINGS: Tuple[Setting, ...] = (
     Setting('autostart', bool, True,
             'walk the lifecycle to active at start (false: wait for configure and activate)'),

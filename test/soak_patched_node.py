@@ -7,7 +7,7 @@ of :data:`soak_harness.broken.VARIANTS`. Never run it against real equipment.
 
 import sys
 
-from drive_bridge.ros import node
+from drive_bridge.ros import process
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
 from soak_harness.broken import broken
 
@@ -16,7 +16,7 @@ def main() -> int:
     """Break the bridge as the first argument says, then run the node with the rest."""
     variant = sys.argv.pop(1)
     with broken(variant, RtuSerialTransport):
-        return node.main(sys.argv)
+        return process.main(sys.argv)
 
 
 if __name__ == '__main__':

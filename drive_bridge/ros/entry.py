@@ -5,21 +5,21 @@ Importing rclpy and the message packages starts threads (DDS, and numpy's thread
 through ``sensor_msgs``) that take the signal mask of the thread that started them. A
 thread that does not block SIGINT/SIGTERM could take a signal meant for the node's
 ``sigtimedwait`` and end the process in the middle of its stops. So this module, which
-imports nothing heavy, blocks them first and then imports the node.
+imports nothing heavy (:mod:`drive_bridge.ros.exit_signals` is standard library only),
+blocks them first and then imports the process's main (:mod:`drive_bridge.ros.process`).
 """
 
-import signal
 import sys
 from typing import List, Optional
 
-EXIT_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+from drive_bridge.ros.exit_signals import block_in_this_thread
 
 
 def main(args: Optional[List[str]] = None) -> int:
     """Block the exit signals in this and every later thread, then run the node."""
-    signal.pthread_sigmask(signal.SIG_BLOCK, EXIT_SIGNALS)
-    from drive_bridge.ros import node  # noqa: I100 - after the mask, on purpose
-    return node.main(args)
+    block_in_this_thread()
+    from drive_bridge.ros import process  # noqa: I100 - after the mask, on purpose
+    return process.main(args)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,120 @@
+"""
+One device's ROS interface: its topics, its ``speed_reference`` and its Trigger services.
+
+Like ros2_canopen's per-axis ``ChannelContext``: the node builds one :class:`DeviceInterface`
+per configured device, in a loop, under the device's name, and destroys them when it closes
+the bus. The services are coroutines that submit the command and await the bus's answer
+(:mod:`drive_bridge.ros.service_calls`); ``speed_reference`` only hands the value to the bus.
+Both ask the :class:`~drive_bridge.ros.gate.CommandGate` first, so an inactive node sends
+nothing but stops, and a closed bus nothing at all.
+"""
+
+from dataclasses import dataclass
+import functools
+
+from drive_bridge import config as cfg
+from drive_bridge.bus.events import BusEvent
+from drive_bridge.bus.master import DeviceSnapshot
+from drive_bridge.errors import CommandRefused, DriveBridgeError
+from drive_bridge.protocol.commands import Command
+from drive_bridge.ros.bus_events import publish_event
+from drive_bridge.ros.command_inputs import CommandInputs
+from drive_bridge.ros.gate import CommandGate
+from drive_bridge.ros.publishers import DevicePublishers
+from drive_bridge.ros.service_calls import ServiceCalls
+from rclpy.lifecycle import LifecycleNode
+from std_msgs.msg import Float32
+from std_srvs.srv import Trigger
+
+SERVICE_COMMANDS = (Command.START, Command.STOP, Command.QUICK_STOP, Command.COAST_STOP,
+                    Command.RESET)
+
+
+@dataclass(frozen=True)
+class CommandPaths:
+    """What every device's interface shares with the node for its commands."""
+
+    gate: CommandGate
+    calls: ServiceCalls
+    inputs: CommandInputs
+    give_up_s: float  # a service gives up waiting for the bus after this
+
+
+class DeviceInterface:
+    """The publishers, the speed_reference subscription and the services of one device."""
+
+    def __init__(self, node: LifecycleNode, snapshot: DeviceSnapshot, paths: CommandPaths):
+        self.name = snapshot.name
+        self._node = node
+        self._logger = node.get_logger()
+        self._paths = paths
+        self.publishers = DevicePublishers(node, self.name, snapshot.reading_fields)
+        self.publishers.publish_state('unknown')
+        self._speed_reference = None
+        if cfg.FAMILIES[snapshot.family].reference:
+            self._speed_reference = paths.inputs.speed_reference(self.name,
+                                                                 self._on_speed_reference)
+        self._services = [
+            node.create_service(Trigger, f'{self.name}/{command.value}',
+                                functools.partial(self._on_trigger, command),
+                                callback_group=paths.calls.callback_group)
+            for command in SERVICE_COMMANDS if command in snapshot.commands]
+
+    def show(self, event: BusEvent) -> None:
+        """Publish or log a bus event of this device (bus thread)."""
+        publish_event(self.publishers, self._logger, event)
+
+    def destroy_publishers(self) -> None:
+        """Destroy the device's publishers (nothing publishes any more)."""
+        self.publishers.destroy()
+
+    def destroy_endpoints(self) -> None:
+        """Destroy the speed_reference subscription and the services."""
+        if self._speed_reference is not None:
+            self._paths.inputs.destroy(self._speed_reference)
+            self._speed_reference = None
+        for service in self._services:
+            self._node.destroy_service(service)
+        self._services = []
+
+    async def _on_trigger(self, command: Command, request: Trigger.Request,
+                          response: Trigger.Response) -> Trigger.Response:
+        """Send ``command`` and answer once the device acknowledged it or it failed."""
+        try:
+            response.message = await self._command(command)
+            response.success = True
+        except DriveBridgeError as error:
+            response.success, response.message = False, str(error)
+        except Exception as error:  # noqa: B902 - a bug must not kill the node
+            response.success = False
+            response.message = f'{command.value} failed: internal error ' \
+                f'{type(error).__name__}: {error}'
+        if response.success:  # one logging call site per severity (rclpy caches them)
+            self._logger.info(f'{self.name}/{command.value}: {response.message}')
+        else:
+            self._logger.warning(f'{self.name}/{command.value}: {response.message}')
+        return response
+
+    async def _command(self, command: Command) -> str:
+        gate = self._paths.gate
+        bus = gate.bus_for(command)
+        future = bus.submit_command(self.name, command)
+        if future.done() and future.exception() is not None and not gate.active:
+            raise CommandRefused(f'{gate.inactive_reason()} ({future.exception()})')
+        return await self._paths.calls.answer_of(future, command.value, self._paths.give_up_s)
+
+    def _on_speed_reference(self, message: Float32) -> None:
+        gate = self._paths.gate
+        bus = gate.bus
+        if not gate.active or bus is None:
+            self._logger.warning(f'{self.name}/speed_reference: {gate.inactive_reason()}',
+                                 throttle_duration_sec=1.0)
+            return
+        try:
+            bus.set_speed_reference(self.name, message.data, from_topic=True)
+        except CommandRefused as error:
+            self._logger.warning(f'{self.name}/speed_reference: {error}',
+                                 throttle_duration_sec=1.0)
+        except Exception as error:  # noqa: B902 - a bug must not kill the node
+            self._logger.error(f'{self.name}/speed_reference: internal error '
+                               f'{type(error).__name__}: {error}')

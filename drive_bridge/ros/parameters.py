@@ -1,0 +1,165 @@
+"""
+The node's parameters: declared from the settings (:mod:`drive_bridge.config`), changed at runtime.
+
+:class:`ParameterDeclarations` declares the node's own settings at construction and the
+bus's and devices' settings at configure (each once; a later configure reads them back), and
+builds the typed configuration from them; a value rclpy refuses gets the setting's reason.
+:class:`RuntimeSettings` is the on-set-parameters callback: it checks every change first and
+then applies them all at once, on the bus and on the joints, or none of them.
+"""
+
+import time
+from typing import Any, Dict, List, Mapping, Optional, Protocol
+
+from drive_bridge import config as cfg
+from drive_bridge.bus.master import BusMaster
+from drive_bridge.errors import CommandRefused, ConfigError
+from drive_bridge.settings import check_value, Setting
+from rcl_interfaces.msg import (
+    FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+SettingChanges = Dict[str, Dict[str, Any]]  # device -> setting name -> checked value
+
+
+def descriptor(setting: Setting, label: str) -> ParameterDescriptor:
+    """Return the parameter descriptor of a setting: its text, range and whether it is runtime."""
+    result = ParameterDescriptor(
+        name=label, description=f'{setting.description}; allowed {setting.allowed()}',
+        read_only=not setting.runtime, dynamic_typing=True)
+    if setting.low is not None and setting.kind is float:
+        result.floating_point_range = [FloatingPointRange(
+            from_value=float(setting.low), to_value=float(setting.high), step=0.0)]
+    elif setting.low is not None and setting.kind is int:
+        result.integer_range = [IntegerRange(
+            from_value=int(setting.low), to_value=int(setting.high), step=1)]
+    return result
+
+
+class ParameterDeclarations:
+    """Declares the node's parameters and builds the configuration from them."""
+
+    def __init__(self, node: Node):
+        self._node = node
+
+    def node_values(self) -> Dict[str, Any]:
+        """Declare the node's own settings (autostart, ...) and return their values."""
+        return {setting.name: self._declare(setting, setting.name)
+                for setting in cfg.NODE_SETTINGS}
+
+    def load_config(self) -> cfg.BridgeConfig:
+        """Declare the bus's and devices' parameters; return the checked configuration."""
+        protocol = self._declare(cfg.BUS_SETTINGS[0], 'protocol')
+        settings = {setting.name: setting for setting in cfg.BUS_SETTINGS}
+        bus_values = {'protocol': protocol}
+        for name in cfg.bus_parameter_names(protocol):
+            if name in settings and name != 'protocol':
+                bus_values[name] = self._declare(settings[name], name)
+        names = bus_values.get('devices') or []
+        if not isinstance(names, list):
+            raise ConfigError(f"parameter 'devices' = {names!r} has the wrong type: give a "
+                              'list of device names')
+        cfg.check_device_names(names)
+        device_values = {name: self._declare_device(name) for name in names}
+        cfg.check_unknown_parameters(
+            self._overrides(), self._node.has_parameter, names, protocol,
+            {name: values['family'] for name, values in device_values.items()})
+        return cfg.build_config(bus_values, device_values)
+
+    def _overrides(self) -> Mapping[str, Parameter]:
+        """Return the parameters given at start (rclpy 7.1 has no public accessor)."""
+        return getattr(self._node, '_parameter_overrides', {}) or {}
+
+    def _declare_device(self, name: str) -> Dict[str, Any]:
+        family_name = self._declare(cfg.COMMON_DEVICE_SETTINGS[0], f'{name}.family')
+        check_value(cfg.COMMON_DEVICE_SETTINGS[0], family_name, f'{name}.family')
+        family = cfg.FAMILIES[family_name]
+        values = {'family': family_name}
+        for setting in cfg.device_settings(family)[1:]:
+            values[setting.name] = self._declare(setting, f'{name}.{setting.name}')
+        return values
+
+    def _declare(self, setting: Setting, label: str) -> Any:
+        """Declare (once) and return a parameter; a value rclpy refuses gets our reason."""
+        node = self._node
+        if node.has_parameter(label):  # configured before, cleaned up since
+            value = node.get_parameter(label).value
+        else:
+            try:
+                value = node.declare_parameter(label, setting.default,
+                                               descriptor(setting, label)).value
+            except Exception:  # noqa: B902 - rclpy's range errors: say it our way
+                override = self._overrides().get(label)
+                check_value(setting, getattr(override, 'value', None), label)
+                raise ConfigError(f'parameter {label!r} is refused: allowed '
+                                  f'{setting.allowed()}') from None
+        return list(value) if isinstance(value, (list, tuple)) else value
+
+
+class TakesJointSettings(Protocol):
+    """What runtime changes ask of the joints (:class:`drive_bridge.ros.joints.JointBridge`)."""
+
+    def check_settings(self, changes: SettingChanges) -> None:
+        """Raise ConfigError for a change the joints cannot take."""
+
+    def apply_settings(self, changes: SettingChanges) -> None:
+        """Take changes already applied on the bus."""
+
+
+class RuntimeSettings:
+    """The on-set-parameters callback: every change checked, then all applied or none."""
+
+    def __init__(self, logger, allow_runtime_control_enable: bool):
+        self._logger = logger
+        self.allow_runtime_control_enable = allow_runtime_control_enable
+        self.changes_in_words: Dict[str, str] = {}  # device -> allow_control changed, in words
+
+    def on_set(self, parameters: List[Parameter], bus: Optional[BusMaster],
+               joints: Optional[TakesJointSettings]) -> SetParametersResult:
+        """Check every change first, then apply them all at once on the bus, or none."""
+        if bus is None:  # declaring at configure: build_config validates them
+            return SetParametersResult(successful=True)
+        try:
+            changes = self._checked(parameters, bus)
+            enabling = [device for device, change in changes.items()
+                        if change.get('allow_control') and not bus.snapshot(device).allow_control]
+            if joints is not None:
+                joints.check_settings(changes)
+            bus.apply_settings(changes)
+            if joints is not None:
+                joints.apply_settings(changes)
+        except (ConfigError, CommandRefused) as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        self._record(changes, enabling)
+        return SetParametersResult(successful=True)
+
+    def _checked(self, parameters: List[Parameter], bus: BusMaster) -> SettingChanges:
+        settings = cfg.all_device_settings()
+        changes: SettingChanges = {}
+        for parameter in parameters:
+            device, _, name = parameter.name.partition('.')
+            setting = settings.get(name)
+            if device not in bus.device_names or setting is None or not setting.runtime:
+                continue
+            value = check_value(setting, parameter.value, parameter.name)
+            if name == 'allow_control' and value and not \
+                    bus.snapshot(device).allow_control and \
+                    not self.allow_runtime_control_enable:
+                raise ConfigError(
+                    f'{parameter.name} cannot be switched on at runtime here '
+                    '(allow_runtime_control_enable is false): restart the node with it '
+                    'in the parameters file')
+            changes.setdefault(device, {})[name] = value
+        return changes
+
+    def _record(self, changes: SettingChanges, enabling: List[str]) -> None:
+        for device in enabling:
+            stamp = time.strftime('%Y-%m-%dT%H:%M:%S%z')
+            self.changes_in_words[device] = f'control enabled at runtime at {stamp}'
+            self._logger.warning(f'{device}: control ENABLED at runtime (allow_control '
+                                 'set true): commands and writes are taken from now on')
+        for device, change in changes.items():
+            if change.get('allow_control') is False:
+                self.changes_in_words[device] = 'monitor only since a runtime change at ' + \
+                    time.strftime('%Y-%m-%dT%H:%M:%S%z')

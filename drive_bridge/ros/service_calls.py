@@ -1,0 +1,98 @@
+"""
+Service calls awaiting the bus: the bus's future handed to the coroutine that awaits it.
+
+A Trigger service is a coroutine: it submits its command to the bus and awaits
+:meth:`ServiceCalls.answer_of`, so the executor serves topics and timers meanwhile. The bus
+resolves its ``concurrent.futures.Future`` on the bus thread; its callback only triggers a
+guard condition, and on the executor thread :meth:`ServiceCalls._deliver` hands the outcome
+to the coroutine's rclpy future. A call the bus leaves waiting past its give-up time is
+answered there too: a command the bus has not taken yet is cancelled first, so it is never
+sent; one already on its way is answered as "not confirmed". :meth:`ServiceCalls.answer_all`
+refuses every waiting call when the bus is closed, cancelling what was not yet sent.
+"""
+
+from concurrent.futures import Future
+import threading
+import time
+from typing import List
+
+from drive_bridge.errors import CommandRefused, DriveBridgeError
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.task import Future as RosFuture
+
+
+class PendingCall:
+    """A service call waiting for the bus: the bus's future and the one the service awaits."""
+
+    def __init__(self, bus_future: Future, label: str, give_up_at_s: float):
+        self.bus_future = bus_future
+        self.label = label
+        self.give_up_at_s = give_up_at_s
+        self.ros_future = RosFuture()
+
+
+class ServiceCalls:
+    """The calls of one node waiting for its bus, and the guard that hands them the answers."""
+
+    def __init__(self, node: Node):
+        self._pending: List[PendingCall] = []
+        self._lock = threading.Lock()
+        # Service coroutines stay "executing" while they await the bus: they and the guard
+        # that hands them the bus's answers must not share a mutually exclusive group.
+        self.callback_group = ReentrantCallbackGroup()
+        self._answers = node.create_guard_condition(self._deliver,
+                                                    callback_group=self.callback_group)
+
+    async def answer_of(self, bus_future: Future, label: str, give_up_s: float) -> str:
+        """Await the bus's answer (executor thread); raise its error, or ours on giving up."""
+        call = PendingCall(bus_future, label, time.monotonic() + give_up_s)
+        with self._lock:
+            self._pending.append(call)
+        bus_future.add_done_callback(lambda done: self._answers.trigger())
+        if bus_future.done():
+            self._answers.trigger()
+        result = await call.ros_future
+        if isinstance(result, BaseException):
+            raise result
+        return result
+
+    def wake(self) -> None:
+        """Look at the waiting calls soon: answer those the bus left waiting too long."""
+        self._answers.trigger()
+
+    def answer_all(self, reason: str) -> None:
+        """Refuse every waiting call (the bus was closed); what was not sent never is."""
+        with self._lock:
+            pending, self._pending = self._pending, []
+        for call in pending:
+            if not call.ros_future.done():
+                call.bus_future.cancel()
+                call.ros_future.set_result(CommandRefused(f'{call.label}: {reason}'))
+
+    def _deliver(self) -> None:
+        """Hand the bus's answers to the waiting services (executor thread)."""
+        now = time.monotonic()
+        with self._lock:
+            pending, self._pending = self._pending, []
+        for call in pending:
+            if call.bus_future.done():
+                error = call.bus_future.exception()
+                call.ros_future.set_result(error if error is not None
+                                           else call.bus_future.result())
+            elif now > call.give_up_at_s:
+                self._give_up(call)
+            else:
+                with self._lock:
+                    self._pending.append(call)
+
+    @staticmethod
+    def _give_up(call: PendingCall) -> None:
+        """Answer a call the bus did not resolve in time; a command not yet sent never is."""
+        if call.bus_future.cancel():
+            call.ros_future.set_result(CommandRefused(
+                f'{call.label} not sent: the bus did not take it in time; it is never sent'))
+        else:
+            call.ros_future.set_result(DriveBridgeError(
+                f'{call.label} not confirmed: the bus did not answer in time; it may be on '
+                'the wire (see /diagnostics)'))
