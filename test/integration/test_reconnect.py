@@ -1,10 +1,11 @@
 """Twenty reconnect cycles in a row per drill: unplugged adapter, power cycle, gateway restart."""
 
 from drive_bridge.tools.reconnect import DRILLS, run_drill
+from pymodbus_use import marked_params
 import pytest
 
 
-@pytest.mark.parametrize('drill', DRILLS)
+@pytest.mark.parametrize('drill', marked_params(DRILLS, lambda drill: drill == 'tcp'))
 def test_twenty_cycles_recover_without_restart_and_resend_set_up(drill):
     report = run_drill(drill, cycles=20)
     print(report.line())

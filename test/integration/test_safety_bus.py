@@ -20,6 +20,7 @@ from drive_bridge.sim.pty_link import PtyLink
 from drive_bridge.transport.fc_protocol import FcProtocolTransport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.protocols import make_transport
+from pymodbus_use import marked_params
 import pytest
 from safety_helpers import Babbler, MCD_START, McdProbe, sim_pty_master, spy_starts, wait_for
 
@@ -75,7 +76,7 @@ def run_reads(kind: str, port: str, count: int = 5):
     return outcomes
 
 
-TRANSPORTS = ('native', 'pymodbus', 'ap_ascii', 'fc_protocol')
+TRANSPORTS = marked_params(('native', 'pymodbus', 'ap_ascii', 'fc_protocol'))
 
 
 @pytest.mark.parametrize('babbling_line', list(PATTERNS), indirect=True)

@@ -9,6 +9,8 @@ from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from integration_helpers import wait_until
 import pytest
 
+pytestmark = pytest.mark.pymodbus  # every test here runs on ModbusTransport
+
 
 @pytest.fixture
 def sim():
