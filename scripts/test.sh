@@ -12,7 +12,7 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 unit_workers=${UNIT_WORKERS:-2}
-integration_workers=${INTEGRATION_WORKERS:-6}
+integration_workers=${INTEGRATION_WORKERS:-4}
 ros_workers=${ROS_WORKERS:-4}
 
 step_times=()
