@@ -29,7 +29,8 @@ def sim():
 
 @pytest.fixture(params=marked_params(SERIAL_ENGINES))
 def transport(sim, request):
-    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=0.2),
+    # 1 s: no test here times a reply, and a busy machine can hold the simulator up
+    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=1.0),
                                {'serial_engine': request.param})
     transport.connect()
     yield transport

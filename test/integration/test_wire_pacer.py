@@ -104,7 +104,7 @@ def test_a_master_without_the_gap_gets_no_answer(ideal_slave):
     timing = LineTiming(300, 'E', 1)
     server = make_mcd_server({20: 'mcd500'})
     with paced_line(server, timing, ideal_slave=ideal_slave) as pacer, \
-            rtu_master(pacer.path, 300, 1.0) as master:
+            rtu_master(pacer.path, 300, 2.0) as master:  # 0.6 s on the wire; a busy machine
         master.execute(20, ReadRegisters(2, 1))
         with pytest.raises(NoResponse):  # sent the moment the reply was in
             master.execute(20, ReadRegisters(2, 1))
