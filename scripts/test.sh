@@ -37,7 +37,8 @@ finish() {
   local code=$? line
   rm -rf "$workspace"
   if [ -n "$current_step" ]; then
-    step_times+=("$(printf '%-34s %6s  FAILED' "$current_step" "$(seconds_since "$step_started")")")
+    step_times+=("$(printf '%-34s %6s  FAILED' "$current_step" \
+      "$(seconds_since "$step_started")")")
   fi
   echo "== step times (s)"
   for line in "${step_times[@]}"; do echo "   $line"; done
@@ -82,7 +83,10 @@ pytest_in() {  # pytest_in VENV ARGS...: quiet, no cache directory in the checko
   "$venv/bin/python" -m pytest -q -p no:cacheprovider "$@"
 }
 echo "pymodbus $("$VENV/bin/python" -c 'import pymodbus; print(pymodbus.__version__)') in .venv"
-step 'integration tier' pytest_in "$VENV" -n "$integration_workers" test/integration "$@"
+step 'integration tier' pytest_in "$VENV" -n "$integration_workers" -m 'not realtime' \
+  test/integration "$@"
+# Tests whose threads must run within milliseconds, in one process with no workers beside it.
+step 'integration tier: realtime tests' pytest_in "$VENV" -m realtime test/integration "$@"
 step 'ROS tier' pytest_in "$VENV" -n "$ros_workers" test/ros "$@"
 echo "pymodbus $("$VENV369/bin/python" -c 'import pymodbus; print(pymodbus.__version__)')" \
   'in .venv-pymodbus369'

@@ -271,6 +271,7 @@ def native_transport_answered(reply: bytes, pause_s: Optional[float] = None):
         os.close(slave_fd)
 
 
+@pytest.mark.realtime  # the transport must wake before the answering thread writes on
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='VMIN and select: Linux')
 @pytest.mark.parametrize('pause_s', [0.0, 0.002])
 def test_native_engine_wakes_twice_for_a_reply_however_its_bytes_arrive(pause_s, monkeypatch):
