@@ -5,6 +5,7 @@ from pymodbus_use import marked_params
 import pytest
 
 
+@pytest.mark.realtime  # a recovery within 2 s: beside parallel workers and a hog, 3.3 s
 @pytest.mark.parametrize('drill', marked_params(DRILLS, lambda drill: drill == 'tcp'))
 def test_twenty_cycles_recover_without_restart_and_resend_set_up(drill):
     report = run_drill(drill, cycles=20)
