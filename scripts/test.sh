@@ -83,12 +83,12 @@ pytest_in() {  # pytest_in VENV ARGS...: quiet, no cache directory in the checko
   "$venv/bin/python" -m pytest -q -p no:cacheprovider "$@"
 }
 echo "pymodbus $("$VENV/bin/python" -c 'import pymodbus; print(pymodbus.__version__)') in .venv"
-step 'integration tier' pytest_in "$VENV" -n "$integration_workers" -m 'not realtime' \
-  test/integration "$@"
+step 'integration tier' pytest_in "$VENV" -n "$integration_workers" --dist loadgroup \
+  -m 'not realtime' test/integration "$@"
 # Tests whose threads must run within milliseconds, in one process with no workers beside it.
 step 'integration tier: realtime tests' pytest_in "$VENV" -m realtime test/integration "$@"
 step 'ROS tier' pytest_in "$VENV" -n "$ros_workers" test/ros "$@"
 echo "pymodbus $("$VENV369/bin/python" -c 'import pymodbus; print(pymodbus.__version__)')" \
   'in .venv-pymodbus369'
 step 'pymodbus 3.6.9: marked tests' pytest_in "$VENV369" -n "$integration_workers" \
-  -m pymodbus test/unit test/integration "$@"
+  --dist loadgroup -m pymodbus test/unit test/integration "$@"

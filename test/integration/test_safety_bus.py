@@ -24,6 +24,9 @@ from pymodbus_use import marked_params
 import pytest
 from safety_helpers import Babbler, MCD_START, McdProbe, sim_pty_master, spy_starts, wait_for
 
+# One worker runs these one after the other (scripts/test.sh: --dist loadgroup): each babbler is
+# a process that writes as fast as it can, and several at once held reads for seconds.
+pytestmark = pytest.mark.xdist_group('babbling_lines')
 TIMEOUT_S = 0.3
 PATTERNS = {'ff': b'\xff' * 16, 'frames': b'\x14\x03\x0c' * 6, 'nak': b'\x15' * 8,
             'stx': b'\x02\x06\x07\x02' * 4}
