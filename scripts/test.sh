@@ -12,8 +12,8 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 unit_workers=${UNIT_WORKERS:-2}
-integration_workers=${INTEGRATION_WORKERS:-4}
-ros_workers=${ROS_WORKERS:-4}
+integration_workers=${INTEGRATION_WORKERS:-2}
+ros_workers=${ROS_WORKERS:-3}
 
 step_times=()
 current_step=
