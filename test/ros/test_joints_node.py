@@ -140,6 +140,9 @@ def wheels(sim, node, joints):
     """Yield the two simulated drives; stop, reset and re-arm everything after each test."""
     drives = (sim.devices[1].model, sim.devices[2].model)
     joints.sending = True
+    with sim.lock:  # each test sees the words written in its own time (tests share the drives)
+        for drive in drives:
+            drive.control_words_received.clear()
     yield drives
     joints.sending = True
     joints.command(left_wheel_joint=0.0, right_wheel_joint=0.0)
@@ -389,8 +392,11 @@ def _publish_once(joints, names, velocities=None):
 
 def test_bad_commands_are_refused_and_nothing_is_sent(node, joints, wheels):
     left, right = wheels
+    for device in DEVICES:  # a stop: the stop image is kept alive with the reference in force
+        assert node.call(device, 'stop').success
     joints.command(left_wheel_joint=2.0, right_wheel_joint=2.0)
-    assert joints.spin_until(lambda: left.reference_word == 0x0666)
+    assert joints.spin_until(
+        lambda: left.reference_word == 0x0666 and right.reference_word == 0xF99A)
     joints.sending = False
     joints.spin_for(0.2)
     _fresh_diagnostics(node)
