@@ -6,7 +6,7 @@
 #     integration tier            pytest in .venv (pymodbus 3.16), pytest-xdist workers
 #     integration tier: realtime  the tests whose threads must run within milliseconds
 #     pymodbus 3.6.9              the tests marked pymodbus, in .venv-pymodbus369
-#   lane 2 (computes, no deadlines; at a lower priority, nice 10, so lane 1 keeps its times):
+#   lane 2 (computes, no deadlines; in the idle scheduling class, so lane 1 keeps its times):
 #     docs                        scripts/docs.sh (Sphinx, every warning an error)
 #     colcon build, installed commands, then colcon test: the unit tier and the linters,
 #                                 against the install space
@@ -29,12 +29,14 @@ steps="$workspace/steps"  # one line per step that ended: name, wall s, cpu s, F
 : > "$steps"
 
 seconds_since() { awk -v from="$1" -v to="$EPOCHREALTIME" 'BEGIN { printf "%.1f", to - from }'; }
-# The user+system CPU seconds of the children of this shell, from bash's `times`.
+# children_cpu_s FILE: write the user+system CPU seconds of the children of this shell to
+# FILE, from bash's `times` (in this shell: a pipe or $(...) would ask a subshell).
 children_cpu_s() {
-  times | awk 'NR == 2 {
+  times > "$1.times"
+  awk 'NR == 2 {
     total = 0
     for (i = 1; i <= 2; i++) { split($i, t, /[ms]/); total += t[1] * 60 + t[2] }
-    printf "%.1f", total }'
+    printf "%.1f", total }' "$1.times" > "$1"
 }
 # step NAME COMMAND...: run COMMAND, print and keep its wall and CPU time; return its status.
 step() {
@@ -45,7 +47,7 @@ step() {
   (
     "$@"
     status=$?
-    children_cpu_s > "$cpu_file"
+    children_cpu_s "$cpu_file"
     exit $status
   )
   status=$?
@@ -103,7 +105,7 @@ lane_wire() {
   step 'integration tier' pytest_in "$VENV" -n "$integration_workers" --dist loadgroup \
     -m 'not realtime' test/integration "$@"
   # Tests whose threads must run within milliseconds: no CPU-bound workers beside them (lane
-  # 2 runs at nice 10). They wait on the clock, so a few of them share the machine.
+  # 2 runs only on idle CPU time). They wait on the clock, so a few of them share the machine.
   step 'integration tier: realtime tests' pytest_in "$VENV" -n "$realtime_workers" \
     --dist loadgroup -m realtime test/integration "$@"
   step 'pymodbus 3.6.9: marked tests' pytest_in "$VENV369" -n "$integration_workers" \
@@ -121,7 +123,9 @@ colcon_test() {
     && workspace_colcon test-result --all
 }
 lane_compute() {
-  renice -n 10 -p "$BASHPID" > /dev/null  # and so every process this lane starts
+  # The idle scheduling class (or nice 19 where it is refused): this lane's processes run
+  # only on CPU time that the test tiers leave over, and so never delay their deadlines.
+  chrt --idle -p 0 "$BASHPID" 2> /dev/null || renice -n 19 -p "$BASHPID" > /dev/null
   step 'docs' scripts/docs.sh "$workspace/docs"
   if step 'colcon build' workspace_colcon build --event-handlers console_direct-; then
     step 'installed commands' scripts/check_install.sh "$workspace/install"
