@@ -143,6 +143,8 @@ def test_local_operation_is_refused_with_its_reason(node, drive, sim):
 
 def test_setup_writes_and_diagnostics(node, drive):
     assert drive.parameters[803] == 20 and drive.parameters[804] == 2
+    # Under xdist this may be the first test of a fresh node: wait for its first diagnostics.
+    assert node.spin_until(lambda: node.diagnostics('conv') is not None)
     status = node.diagnostics('conv')
     assert status.hardware_id == 'fc fc51 address 1'
     values = {kv.key: kv.value for kv in status.values}
