@@ -59,35 +59,19 @@ def babbling_line(request):
     pty.close()
 
 
-def run_queue_wait_s() -> float:
-    """
-    Return how long this thread has waited for a CPU while runnable (Linux schedstat).
-
-    The kernel's own account: a read that a loaded machine does not schedule waits here,
-    not in the transport.
-    """
-    with open('/proc/thread-self/schedstat') as stats:
-        return int(stats.read().split()[1]) * 1e-9
-
-
 def run_reads(kind: str, port: str, count: int = 5):
-    """
-    Run ``count`` reads on the babbling line; return [(seconds, error, seconds scheduled)].
-
-    Seconds scheduled: the read's wall time less the time its thread waited for a CPU.
-    """
+    """Run ``count`` reads on the babbling line; return [(seconds, error)]."""
     transport, request = transport_and_request(kind, port)
     outcomes = []
     try:
         for _ in range(count):
-            started, waited_before_s = time.monotonic(), run_queue_wait_s()
+            started = time.monotonic()
             try:
                 transport.execute(20, request)
                 error = None
             except TransportError as failure:
                 error = failure
-            seconds = time.monotonic() - started
-            outcomes.append((seconds, error, seconds - (run_queue_wait_s() - waited_before_s)))
+            outcomes.append((time.monotonic() - started, error))
             if not transport.connected:
                 transport.connect()
     finally:
@@ -105,20 +89,16 @@ def test_every_read_ends_at_the_transaction_deadline_on_a_babbling_line(kind, ba
     Case 1: a line that keeps talking never holds a transport past the deadline.
 
     A busy 2-core machine can deschedule this process for a second or more (seen here with
-    a load average of 12; 7.4 s beside a CPU hog, the babbler and a second worker), so one
-    slow read proves nothing: the median read must end within the deadline, and none may be
-    held for seconds while it has a CPU (wall time less the time the kernel kept the
-    thread waiting for one; a loop bounded only by a silence would be held as long as the
-    babbling lasts, scheduled or not).
+    a load average of 12), so one slow read proves nothing: the median read must end
+    within the deadline, and none may be held for seconds (a loop bounded only by a
+    silence would be held as long as the babbling lasts).
     """
     outcomes = run_reads(kind, babbling_line, count=7)
-    print(kind, [f'{seconds:.2f} s ({scheduled_s:.2f} s scheduled) {type(error).__name__}'
-                 for seconds, error, scheduled_s in outcomes])
-    assert all(error is not None for _, error, _ in outcomes), 'babble taken as a reply'
-    seconds = sorted(seconds for seconds, _, _ in outcomes)
+    print(kind, [f'{seconds:.2f} s {type(error).__name__}' for seconds, error in outcomes])
+    assert all(error is not None for _, error in outcomes), 'babble taken as a reply'
+    seconds = sorted(seconds for seconds, _ in outcomes)
     assert seconds[len(seconds) // 2] < TIMEOUT_S + 0.2, f'reads took {seconds} s'
-    scheduled_s = max(scheduled_s for _, _, scheduled_s in outcomes)
-    assert scheduled_s < TIMEOUT_S + 5.0, f'a read was held {scheduled_s:.2f} s on a CPU'
+    assert seconds[-1] < TIMEOUT_S + 5.0, f'a read was held {seconds[-1]:.2f} s'
 
 
 @pytest.mark.parametrize('babbling_line', ['ff'], indirect=True)
@@ -131,8 +111,8 @@ def test_a_babbling_line_is_counted_as_babble(kind, babbling_line):
     for, so one read in five taken as babble is enough, and none may be taken as a reply.
     """
     outcomes = run_reads(kind, babbling_line, count=5)
-    kinds = [error.kind if error else 'reply' for _, error, _ in outcomes]
-    print(kind, kinds, [str(error) for _, error, _ in outcomes][:1])
+    kinds = [error.kind if error else 'reply' for _, error in outcomes]
+    print(kind, kinds, [str(error) for _, error in outcomes][:1])
     assert 'reply' not in kinds
     assert 'babble' in kinds
 
