@@ -30,6 +30,7 @@ LONGEST_FIRST = (
     'test/ros/test_safety_cases.py',  # 110 s in 16 tests
     'test/integration/test_reconnect.py',  # realtime: 16, 11, 11 s
     'test/integration/test_safety_bus.py',  # the babbling lines, one xdist group: 45 s
+    'test/integration/test_fc_protocol_sim.py::test_random_faults',  # 19 s
     'test/integration/test_fc_protocol_transport.py::test_random_wire_bytes',  # 14 s
     'test/integration/test_soak.py',  # 50 s in 9 tests
     'test/integration/test_fault_injection.py::test_ap_ascii_faults',  # 10 s
