@@ -14,6 +14,29 @@ os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', _PROFILE)
 sys.path.insert(0, os.path.dirname(__file__))  # test helpers (integration_helpers)
 
 TIERS = ('unit', 'integration', 'ros')
+# The longest tests first (--durations, 2-core machine), so that pytest-xdist's workers do not
+# end with one of them while the others idle. Only the order changes: a test or module left
+# out runs after these, in collection order. A module whose tests share a module-scoped node
+# is named as a whole, so that its node starts once per worker.
+LONGEST_FIRST = (
+    'test/ros/test_soak_node.py',  # 37 s
+    'test/ros/test_safety_signals.py::test_sigterm_exits_cleanly_under_load',  # 31 s
+    'test/ros/test_safety_parameters.py::test_refused_atomic_set_leaves_the_poll_rate',  # 17 s
+    'test/ros/test_quickstart.py',  # 16 s
+    'test/ros/test_safety_cases.py::test_babbling_line',  # 2 x 14 s
+    'test/ros/test_reconnect_node.py',  # 14 s, module node
+    'test/ros/test_ctl.py',  # 94 s in 26 tests, module node
+    'test/ros/test_joints_node.py',  # 51 s in 12 tests, module node
+    'test/ros/test_safety_cases.py',  # 110 s in 16 tests
+    'test/integration/test_reconnect.py',  # realtime: 16, 11, 11 s
+    'test/integration/test_safety_bus.py',  # the babbling lines, one xdist group: 45 s
+    'test/integration/test_fc_protocol_sim.py::test_random_faults',  # 19 s
+    'test/integration/test_fc_protocol_transport.py::test_random_wire_bytes',  # 14 s
+    'test/integration/test_soak.py',  # 50 s in 9 tests
+    'test/integration/test_fault_injection.py::test_ap_ascii_faults',  # 10 s
+    'test/integration/test_cli.py',  # 60 s in 30 tests
+    'test/integration/test_docs_examples.py',  # 20 s
+)
 
 
 def pytest_configure(config):
@@ -60,8 +83,17 @@ def pytest_collection_modifyitems(config, items):
     Mark each test with its tier, from its directory: ``pytest -m unit`` runs test/unit.
 
     The full-length soaks (marked ``soak``) run only when ``-m`` names them
-    (``pytest -m soak test``); every run runs their shorter versions.
+    (``pytest -m soak test``); every run runs their shorter versions. The tests of
+    ``LONGEST_FIRST`` run first, in its order.
     """
+    def rank(item) -> int:
+        for index, prefix in enumerate(LONGEST_FIRST):
+            if item.nodeid.startswith(prefix) or \
+                    f'test/{item.nodeid}'.startswith(prefix):
+                return index
+        return len(LONGEST_FIRST)
+
+    items.sort(key=rank)
     for item in items:
         tier = item.path.parent.name
         if tier in TIERS:
