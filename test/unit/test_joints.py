@@ -354,6 +354,24 @@ def test_bad_commands_are_counted_and_nothing_is_taken():
     assert any("unknown joint 'caster'" in text for text in warnings)
 
 
+def test_serialized_commands_are_taken_as_the_messages_they_carry():
+    serialize = pytest.importorskip('rclpy.serialization').serialize_message
+    bench = Bench()
+    bench.run(0.3)
+    bench.bridge.on_serialized_commands(serialize(JointState(
+        name=['left_wheel', 'right_wheel'], velocity=[10.0, 4.0], position=[1.0, 2.0])))
+    assert bench.reference_word('left') == 0x2000
+    assert bench.reference_word('right') == (-3276) & 0xFFFF
+    data = serialize(JointState(name=['left_wheel'], velocity=[2.0]))
+    bench.bridge.on_serialized_commands(data[:-6])  # cut short: nothing taken
+    bench.bridge.on_serialized_commands(b'\x00\x01\x00')
+    assert bench.reference_word('left') == 0x2000
+    assert bench.bridge.counters == {'messages': 3, 'unknown_names': 0,
+                                     'without_velocity': 0, 'malformed': 2}
+    status = bench.bridge.commands_status('drive_bridge: ~/joint_commands')
+    assert 'not a JointState' in status.message and 'nothing sent' in status.message
+
+
 def test_warnings_are_logged_at_most_once_a_second_per_kind():
     bench = Bench()
     bench.run(0.3)

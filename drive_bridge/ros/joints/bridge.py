@@ -47,8 +47,12 @@ class JointBridge:
         self.states.on_bus_event(event)
 
     def on_commands(self, message: JointState) -> None:
-        """Take a JointState command (executor thread); see JointCommands."""
+        """Take a JointState command (commands thread); see JointCommands."""
         self.commands.on_commands(message)
+
+    def on_serialized_commands(self, data: bytes) -> None:
+        """Take a serialized JointState command (commands thread); see JointCommands."""
+        self.commands.on_serialized(data)
 
     def check_settings(self, changes: SettingChanges) -> None:
         """Raise ConfigError for a runtime change the joints cannot take (nothing applied)."""

@@ -34,7 +34,7 @@ class JointInterface:
         self.bridge = JointBridge(bus, specs, self.publisher.publish, node.get_logger(),
                                   is_active, stamp_offset_ns(node, bus.clock),
                                   batch=BATCH_STATES)
-        self.subscription = inputs.joint_commands(self.bridge.on_commands)
+        self.subscription = inputs.joint_commands(self.bridge.on_serialized_commands)
 
     def destroy(self) -> None:
         """Destroy the publisher and the subscription."""
