@@ -22,7 +22,11 @@ executor before issue 29) and Fast DDS's threads. Each case is run several times
 in turn; the table gives the median and the range. ``--compare LABEL=DIR`` (repeatable)
 runs the node from each directory's ``drive_bridge`` package in turn (``LABEL=`` alone: the
 installed one), so that two versions meet the same noise.
+``--floor`` also measures a bare rclpy process that takes the same commands as the node's
+commands thread does (its own node, serialized, EventsExecutor) with an empty callback:
+what rclpy and Fast DDS cost per message before any work of the node's.
 Run: .venv/bin/python bench/joint_cpu.py [window s] [baud] [runs] [--compare LABEL=DIR ...]
+[--floor]
 """
 
 import argparse
@@ -121,6 +125,63 @@ def client_main(mode: str, seconds: float) -> None:
     rclpy.try_shutdown()
 
 
+def receiver_main() -> None:
+    """
+    Take ``~/joint_commands`` as the node's commands thread does, with an empty callback.
+
+    A node of its own (no parameter services, no /rosout), the subscription serialized,
+    spun by rclpy's EventsExecutor: what rclpy and Fast DDS cost per message on this
+    machine before any of the node's own work (the floor of the commands' cost).
+    """
+    from rclpy.experimental import EventsExecutor
+    from rclpy.parameter import Parameter
+    rclpy.init()
+    node = rclpy.create_node('drive_bridge', enable_rosout=False,
+                             start_parameter_services=False,
+                             parameter_overrides=[Parameter('start_type_description_service',
+                                                            value=False)])
+    node.create_subscription(JointState, '/drive_bridge/joint_commands', lambda data: None,
+                             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
+                             raw=True)
+    executor = EventsExecutor()
+    executor.add_node(node)
+    print('receiver ready', flush=True)
+    while rclpy.ok():
+        executor.spin_once(timeout_sec=0.5)
+
+
+def run_floor(window_s: float) -> Dict:
+    """Measure the floor: a bare receiver process of the client's 100 Hz commands."""
+    receiver = subprocess.Popen([sys.executable, __file__, '--receiver'],
+                                stdout=subprocess.PIPE, text=True)
+    helper = None
+    try:
+        assert receiver.stdout.readline().strip() == 'receiver ready'
+        helper = subprocess.Popen(
+            [sys.executable, __file__, '--client', 'commands', str(WARM_UP_S + window_s + 5.0)],
+            stdout=subprocess.PIPE, text=True)
+        assert helper.stdout.readline().strip() == 'client ready'
+        wait_for(lambda: False, WARM_UP_S)
+        before = thread_cpu.sample(receiver.pid)
+        started_s = time.monotonic()
+        time.sleep(window_s)
+        after = thread_cpu.sample(receiver.pid)
+        ended_s = time.monotonic()
+        rates = json.loads(helper.stdout.readline())
+    finally:
+        for child in (helper, receiver):
+            if child is not None:
+                child.terminate()
+                child.wait()
+                child.stdout.close()
+    rows = thread_cpu.shares(before, after, ended_s - started_s, {})
+    shares = thread_cpu.by_name(rows)
+    return {'cpu': thread_cpu.total_pct(rows), 'commands': rates['commands'],
+            'dds': sum(value for name, value in shares.items() if name.startswith('dds')),
+            'python': sum(value for name, value in shares.items()
+                          if not name.startswith('dds'))}
+
+
 def run_case(baudrate: int, window_s: float, joints: bool, client: Optional[str],
              source: str) -> Dict:
     """Measure one case; return its figures."""
@@ -195,10 +256,16 @@ def main() -> None:
     parser.add_argument('baudrate', nargs='?', type=int, default=38400)
     parser.add_argument('runs', nargs='?', type=int, default=3)
     parser.add_argument('--compare', action='append', default=[], metavar='LABEL=DIR')
+    parser.add_argument('--floor', action='store_true',
+                        help='also measure a bare receiver of the commands (the floor)')
     parser.add_argument('--client', nargs=2, help=argparse.SUPPRESS)
+    parser.add_argument('--receiver', action='store_true', help=argparse.SUPPRESS)
     arguments = parser.parse_args()
     if arguments.client:
         client_main(arguments.client[0], float(arguments.client[1]))
+        return
+    if arguments.receiver:
+        receiver_main()
         return
     print(thread_cpu.machine())
     print(f'drive_bridge_node, {JOINTS} FC 51 running, poll_rate 100 (as fast as the line '
@@ -208,15 +275,24 @@ def main() -> None:
     rclpy.init()
     compared = versions(arguments.compare)
     results = {label: {case: [] for case, *_ in CASES} for label, _ in compared}
+    floors: List[Dict] = []
     try:
         for _ in range(arguments.runs):  # in turn, so that a noisy minute hits them all
             for label, source in compared:
                 for case, joints, client in CASES:
                     results[label][case].append(run_case(
                         arguments.baudrate, arguments.window_s, joints, client, source))
+            if arguments.floor:
+                floors.append(run_floor(arguments.window_s))
     finally:
         rclpy.try_shutdown()
     print_table(results)
+    if floors:
+        print(f'floor: a bare rclpy process taking the same commands (EventsExecutor, '
+              f'serialized, empty callback): {cell([f["cpu"] for f in floors])} % of one core '
+              f'(Python thread {cell([f["python"] for f in floors])}, Fast DDS '
+              f'{cell([f["dds"] for f in floors])}) at '
+              f'{cell([f["commands"] for f in floors])} commands/s')
     print(thread_cpu.load())
 
 

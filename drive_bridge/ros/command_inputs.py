@@ -89,11 +89,6 @@ class CommandInputs:
         thread, self._thread = self._thread, None
         return thread.stop() if thread is not None else True
 
-    @property
-    def spinning(self) -> bool:
-        """Return whether the commands thread runs."""
-        return self._thread is not None and self._thread.alive
-
     def destroy_node(self) -> None:
         """Stop the thread and destroy the commands node."""
         self.stop()

@@ -11,8 +11,11 @@ of its own on a thread of its own: rclpy's ``EventsExecutor`` where rclpy has it
 what this node has: synchronous subscription callbacks, no guard conditions, no coroutines),
 else a ``SingleThreadedExecutor``.
 
-:meth:`CommandsThread.stop` ends the thread and waits for it, so once it returns no
-callback of the node runs or will run: the node calls it before it closes the bus. The
+The thread calls ``spin_once`` with a timeout and looks at its stop flag in between: in
+rclpy 7.1.6 the EventsExecutor's ``spin()`` and ``spin_once()`` without a timeout keep a
+core busy and take nothing (seen on the development machine). :meth:`CommandsThread.stop`
+ends the thread and waits for it, so once it returns no callback of the node runs or will
+run: the node calls it before it closes the bus. The
 thread inherits the signal mask of the thread that starts it (the exit signals are blocked
 in every thread, :mod:`drive_bridge.ros.exit_signals`).
 """
@@ -48,15 +51,9 @@ class CommandsThread:
         self._stop = threading.Event()
         self.executor = make_executor(node)
         self.executor.add_node(node)
-        self.errors = 0  # exceptions a callback let through (each printed)
         self._thread: Optional[threading.Thread] = threading.Thread(
             target=self._spin, name=THREAD_NAME, daemon=True)
         self._thread.start()
-
-    @property
-    def alive(self) -> bool:
-        """Return whether the thread still runs."""
-        return self._thread is not None and self._thread.is_alive()
 
     def stop(self, timeout_s: float = JOIN_TIMEOUT_S) -> bool:
         """
@@ -90,6 +87,5 @@ class CommandsThread:
             except Exception as error:  # noqa: B902 - a callback's bug must not end the thread
                 if self._stop.is_set() or not rclpy.ok(context=self._node.context):
                     return
-                self.errors += 1
                 print(f'[drive_bridge] {THREAD_NAME}: {type(error).__name__}: {error}',
                       file=sys.stderr, flush=True)
