@@ -58,7 +58,7 @@ def modbus_polls(count: int) -> List[List[Tuple[str, bytes, bytes]]]:
 def cycle_requests(profile, control) -> list:
     """Return the requests of one poll cycle, answered with zeros."""
     requests = []
-    cycle = profile.poll(control)
+    cycle = profile.poll(control, 0.0)
     try:
         step = next(cycle)
         while True:

@@ -5,6 +5,7 @@
 # Usage: scripts/check_install.sh INSTALL_DIR
 set -euo pipefail
 install=$(cd "${1:?install dir}" && pwd)
+cd "$install"  # a drive_bridge/ in the caller's directory would shadow the installed one
 lib="$install/drive_bridge/lib/drive_bridge"
 for command in drive_bridge_node drive_bridge_sim drive-bridge drive_bridge_plot \
     drive_bridge_record drive_bridge_ctl; do

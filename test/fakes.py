@@ -40,15 +40,15 @@ def run_for(bus, clock, seconds):
         bus.run_step(max_wait_s=end - clock.now)  # the bus sleeps on ``clock``
 
 
-def drive_cycle(profile, answer, control=None):
+def drive_cycle(profile, answer, control=None, now_s=0.0):
     """
-    Run one poll cycle of ``profile`` with ``answer(request)`` giving each reply.
+    Run one poll cycle of ``profile``, begun at ``now_s``, with ``answer(request)`` giving replies.
 
     ``answer`` may also be a list of replies, in order. Returns (requests sent, reading).
     """
     from drive_bridge.devices.contracts import FixedControl
     replies = list(answer) if isinstance(answer, (list, tuple)) else None
-    cycle = profile.poll(control or FixedControl())
+    cycle = profile.poll(control or FixedControl(), now_s)
     requests = []
     result = None
     try:
@@ -61,10 +61,10 @@ def drive_cycle(profile, answer, control=None):
         return requests, done.value
 
 
-def poll_requests(profile, control=None):
+def poll_requests(profile, control=None, now_s=0.0):
     """Return the first request of a poll cycle of ``profile`` (without running it)."""
     from drive_bridge.devices.contracts import FixedControl
-    return next(profile.poll(control or FixedControl())).request
+    return next(profile.poll(control or FixedControl(), now_s)).request
 
 
 _READABLE = os.pipe()

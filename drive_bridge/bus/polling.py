@@ -74,7 +74,7 @@ class PollScheduler:
     def _begin(self, device: BusDevice, now_s: float) -> None:
         with self.devices.locked():
             device.health.schedule_next(device.poll_period_s, now_s)
-        self.current = PollRun(device, device.profile.poll(device.owner), now_s)
+        self.current = PollRun(device, device.profile.poll(device.owner, now_s), now_s)
         self._step(self.current)
 
     def _step(self, poll: PollRun) -> None:

@@ -162,7 +162,8 @@ def retryable(error: TransportError) -> bool:
 
 def run_poll(runner: TransactionRunner, device: BusDevice, retries: int = 0) -> DeviceReading:
     """Run one whole poll cycle of ``device`` now (no commands in between): the CLI's poll."""
-    poll = PollRun(device, device.profile.poll(device.owner), runner.clock())
+    now_s = runner.clock()
+    poll = PollRun(device, device.profile.poll(device.owner, now_s), now_s)
     while True:
         step = poll.next_step()
         if step is None:

@@ -13,9 +13,13 @@ the next step only when it is about to send it, so a write built from the contro
 drives' keepalive) always carries what is in force at that moment, even when a command was
 sent between two steps of the same cycle.
 
-What a profile reads slowly (in turn, once a readout period) it keeps with the poll that read
-it (:class:`Freshness`): such a value decides or refines a state, a trip or a published field
-only while it is at least as fresh as the fast values it would override.
+A profile has no clock: the bus gives each poll cycle the time it begins on the bus's clock
+(``now_s``), and the profile schedules its slow readouts by that (:class:`SlowReadouts`), so
+a bus on a virtual clock (a soak's virtual line, a test's fake clock) reads them once a
+readout period of its own time, as a bus on the wall clock does. What a profile reads slowly
+it keeps with the poll that read it (:class:`Freshness`): such a value decides or refines a
+state, a trip or a published field only while it is at least as fresh as the fast values it
+would override.
 
 Optional capabilities are abstract classes that a profile class inherits explicitly; the bus
 asks ``isinstance(profile, Capability)`` and never probes attributes:
@@ -29,7 +33,6 @@ asks ``isinstance(profile, Capability)`` and never probes attributes:
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-import time
 from typing import (
     Any, Callable, Dict, FrozenSet, Generator, List, Mapping, Optional, Sequence, Tuple)
 
@@ -182,20 +185,24 @@ class SlowReadouts:
 
     The fast values (status, current, speed) are read every poll; the slow ones (an FC
     drive's frequency, thermal load and status words in turn, an MCD's product registers, the
-    LVSG operating parameters) only when due. ``period_s`` 0 reads them every poll.
+    LVSG operating parameters) only when due. ``period_s`` 0 reads them every poll. The time
+    is the bus's, as the poll began (``now_s`` of :meth:`DeviceProfile.poll`): a schedule of
+    its own would follow the wall clock while a bus runs on a virtual one.
     """
 
-    def __init__(self, period_s: float = 1.0, clock: Callable[[], float] = time.monotonic):
+    def __init__(self, period_s: float = 1.0):
         self.period_s = period_s
-        self.clock = clock
         self._next_s = -float('inf')
 
-    def due(self) -> bool:
-        """Return whether this poll reads slow readouts (and count it as the one that does)."""
-        now = self.clock()
-        if now < self._next_s:
+    def due(self, now_s: float) -> bool:
+        """
+        Return whether the poll that began at ``now_s`` reads slow readouts.
+
+        If so, count it as the one that does: the next is due ``period_s`` later.
+        """
+        if now_s < self._next_s:
             return False
-        self._next_s = now + self.period_s
+        self._next_s = now_s + self.period_s
         return True
 
 
@@ -289,8 +296,12 @@ class DeviceProfile(ABC):
         return frozenset()
 
     @abstractmethod
-    def poll(self, control: ControlView) -> PollCycle:
-        """Return a new poll cycle (a generator, see the module docstring)."""
+    def poll(self, control: ControlView, now_s: float) -> PollCycle:
+        """
+        Return a new poll cycle (a generator, see the module docstring).
+
+        ``now_s``: the time the cycle begins on the bus's clock (the slow readouts' schedule).
+        """
 
     @abstractmethod
     def command_plan(self, command: Command, control: ControlView) -> CommandPlan:

@@ -197,10 +197,14 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
                  ('software_version', self.data.version_parameter))
         return tuple((key, number) for key, number in pairs if number is not None)
 
-    def next_rotating_readout(self) -> Optional[str]:
-        """Return the slow readout whose turn it is, if this poll reads one (they take turns)."""
+    def next_rotating_readout(self, now_s: float) -> Optional[str]:
+        """
+        Return the slow readout whose turn it is, if the poll begun at ``now_s`` reads one.
+
+        They take turns, one a readout period.
+        """
         rotating = [name for name in self.readouts if name not in ALWAYS_READ]
-        if not rotating or not self.slow_readouts.due():
+        if not rotating or not self.slow_readouts.due(now_s):
             return None
         name = rotating[self._rotation % len(rotating)]
         self._rotation += 1
@@ -390,7 +394,7 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
         self.drive_link_timeout_s = drive_link_timeout_s
 
     # -- polling ------------------------------------------------------------------------
-    def poll(self, control: ControlView) -> PollCycle:
+    def poll(self, control: ControlView, now_s: float) -> PollCycle:
         """Return one cycle (see the class docstring)."""
         self.read.begin_poll()
         identity = {}
@@ -407,7 +411,7 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
             raise ProtocolError('status coils 33-64 missing from the reply')
         status_word, actual_word = coils_to_words(coils[:PROCESS_COILS])
         read = [name for name in ALWAYS_READ if name in self.readouts]
-        rotating = self.next_rotating_readout()
+        rotating = self.next_rotating_readout(now_s)
         if rotating is not None:
             read.append(rotating)
         read += self.take_status(StatusWord(status_word), read)

@@ -57,7 +57,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
         self._follow_up: List[str] = []
 
     # -- polling ------------------------------------------------------------------------
-    def poll(self, control: ControlView) -> PollCycle:
+    def poll(self, control: ControlView, now_s: float) -> PollCycle:
         """One telegram: control word and reference in, status and one readout back."""
         self.read.begin_poll()
         identity = {}
@@ -65,7 +65,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
             result = yield PollStep(self._read_request(self.data.spec(number)), optional=True)
             identity[key] = self._identity_value(number, result)
         self.take_identity(identity)
-        name = self._next_readout()
+        name = self._next_readout(now_s)
         spec = self.readouts[name]
         word = control_word_for(control.steady)  # built now: what is in force at this moment
         request = self._read_request(spec, IGNORED_CONTROL_WORD if word is None else word,
@@ -84,7 +84,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
         self._follow_up = self.take_status(status, [name])
         return self.reading(reply.pcd1, reply.pcd2, control)
 
-    def _next_readout(self) -> str:
+    def _next_readout(self, now_s: float) -> str:
         """Return the readout whose turn it is: follow-ups, then current and slow ones."""
         if self._follow_up:
             return self._follow_up.pop(0)
@@ -92,7 +92,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
         current = [name for name in ALWAYS_READ if name in self.readouts]
         if current and self._turn % 2:  # the current at least every other telegram
             return current[0]
-        return self.next_rotating_readout() or current[0]
+        return self.next_rotating_readout(now_s) or current[0]
 
     def take_readout_error(self, name: str, error: DeviceException) -> None:
         """Note a readout the drive refused (the reading goes on without it)."""

@@ -101,11 +101,11 @@ class OperatingParameters:
         """Return parameter 2 (trip code, state byte) if it is current, else None."""
         return self.read.current(lvsg.PARAMETER_STATE, self.state_since)
 
-    def take_answer(self, status: lvsg.Status) -> None:
-        """Keep the answer to the request in force and choose the next request."""
+    def take_answer(self, status: lvsg.Status, now_s: float) -> None:
+        """Keep the answer to the request in force; choose the next (poll begun at ``now_s``)."""
         if status.parameter == self.request and not status.invalid_parameter:
             self.read.take(self.request, status.value)
-            self.request = self._next_request()
+            self.request = self._next_request(now_s)
         if status.invalid_parameter and status.parameter == lvsg.PARAMETER_STATE:
             return  # refused: asking again would starve the others
         state = self.state_parameter()  # None: not current
@@ -136,14 +136,14 @@ class OperatingParameters:
             temperature & 0xFF == lvsg.MCD201_TEMPERATURE_PLACEHOLDER
         return 'mcd201' if is_201 else 'mcd202'
 
-    def _next_request(self) -> int:
+    def _next_request(self, now_s: float) -> int:
         slow = (lvsg.PARAMETER_PRODUCT, lvsg.PARAMETER_STATE)
         unread = [number for number in slow if self.read.read_in(number) is None]
         if unread:
             return unread[0]
         if self.request == lvsg.PARAMETER_CURRENT:
             return lvsg.PARAMETER_TEMPERATURE
-        if self.request == lvsg.PARAMETER_TEMPERATURE and self.slow_readouts.due():
+        if self.request == lvsg.PARAMETER_TEMPERATURE and self.slow_readouts.due(now_s):
             self._slow_turn = (self._slow_turn + 1) % len(slow)
             return slow[self._slow_turn]
         return lvsg.PARAMETER_CURRENT
@@ -290,7 +290,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         return f'{", ".join(bits) or "no control bits"} ({owner})'
 
     # -- polling ------------------------------------------------------------------------
-    def poll(self, control: ControlView) -> PollCycle:
+    def poll(self, control: ControlView, now_s: float) -> PollCycle:
         """
         One poll: read back or write the output image, read the input image.
 
@@ -321,7 +321,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
                                                        self.byte_order))
         self.operating.note(status, control.steady)  # in force when the status was read
         if self.extended:
-            self.operating.take_answer(status)
+            self.operating.take_answer(status, now_s)
         if control.steady is None:  # asked again: a command may have gone out meanwhile
             yield from self._clear_unasked_fwd_run(status, control)
         self._resolve_model()

@@ -249,7 +249,7 @@ class McdProfile(DeviceProfile, ParameterAccess):
             return frozenset()
         return frozenset({'motor_current', 'motor_temperature'})
 
-    def poll(self, control: ControlView) -> PollCycle:
+    def poll(self, control: ControlView, now_s: float) -> PollCycle:
         """
         Read 40003-40006 (status, trip, current, temperature) in one transaction.
 
@@ -257,7 +257,7 @@ class McdProfile(DeviceProfile, ParameterAccess):
         are due and until the model is known (never past 40008: section 8, error 05).
         """
         first = REGISTER['starter_status']
-        slow = self.slow_readouts.due() or self._product_registers is None
+        slow = self.slow_readouts.due(now_s) or self._product_registers is None
         last = LAST_STATUS_NUMBER if slow else REGISTER['motor_temperature'].number
         registers = yield PollStep(ReadRegisters(first.address, last - first.number + 1),
                                    stamps=True)

@@ -36,7 +36,7 @@ class McdAsciiProfile(mcd.McdProfile):
 
     commands = frozenset(ap_ascii.COMMANDS)
 
-    def poll(self, control: ControlView) -> PollCycle:
+    def poll(self, control: ControlView, now_s: float) -> PollCycle:
         """
         Ask for status, and current and temperature where the model has them.
 
@@ -48,7 +48,7 @@ class McdAsciiProfile(mcd.McdProfile):
         if not isinstance(replies['status'], int):
             raise ProtocolError('no status in the reply')
         tripped = mcd.STATE_CODES.get(bits(replies['status'], 0, 3)) == 'tripped'
-        keys = ['trip_code'] if tripped or self.slow_readouts.due() else []
+        keys = ['trip_code'] if tripped or self.slow_readouts.due(now_s) else []
         if self.features.has_current:
             keys.append('motor_current')
         if self.features.has_temperature:

@@ -10,11 +10,13 @@ from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from drive_bridge.transport.protocols import SERIAL_ENGINES
 from fakes import kind, message
 from integration_helpers import wait_until
+from pymodbus_use import marked_params
 import pytest
 
 
 @pytest.fixture
 def bus(sim_bus):
+    """Yield a bus on pymodbus's serial client (the tests that use it are marked pymodbus)."""
     events = []
     specs = [DeviceSpec('main', 20, McdProfile('auto'), poll_rate_hz=20.0),
              DeviceSpec('aux', 21, McdProfile('mcd202'), poll_rate_hz=20.0),
@@ -31,6 +33,7 @@ def readings(master, name):
     return [e.reading for e in list(master.events) if e.device == name and kind(e) == 'reading']
 
 
+@pytest.mark.pymodbus
 def test_dead_device_offline_others_polled(bus):
     assert wait_until(lambda: bus.snapshot('dead').online is False, 3.0)
     count = len(readings(bus, 'main'))
@@ -41,6 +44,7 @@ def test_dead_device_offline_others_polled(bus):
     assert bus.snapshot('main').model == 'mcd500'  # auto from register 40007
 
 
+@pytest.mark.pymodbus
 def test_start_stop_sequence_with_acknowledgement(bus):
     assert wait_until(lambda: bus.snapshot('main').online, 3.0)
     assert wait_until(lambda: bus.snapshot('dead').online is False, 5.0)  # probes only now
@@ -55,6 +59,7 @@ def test_start_stop_sequence_with_acknowledgement(bus):
     assert compact == ['ready', 'starting', 'running', 'stopping', 'ready']
 
 
+@pytest.mark.pymodbus
 def test_trip_then_reset(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('aux').online, 3.0)
     with sim_bus.lock:
@@ -67,6 +72,7 @@ def test_trip_then_reset(bus, sim_bus):
     assert wait_until(lambda: readings(bus, 'aux')[-1].state == 'ready', 3.0)
 
 
+@pytest.mark.pymodbus
 def test_hand_on_refusal_reason(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('main').online, 3.0)
     sim_bus.devices[20].model.hand_on = True
@@ -77,6 +83,7 @@ def test_hand_on_refusal_reason(bus, sim_bus):
     assert list(sim_bus.devices[20].model.commands_received) == []
 
 
+@pytest.mark.pymodbus
 def test_parameters_by_number(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('main').online, 3.0)
     assert bus.read_parameter('main', 1).result(timeout=3) == 100  # par. 1-1 FLC = 100 A
@@ -85,6 +92,7 @@ def test_parameters_by_number(bus, sim_bus):
     assert bus.read_parameter('main', 4).result(timeout=3) == 400
 
 
+@pytest.mark.pymodbus
 def test_model_mismatch_refuses_commands(sim_bus):
     spec = DeviceSpec('wrong', 21, McdProfile('mcd500'), poll_rate_hz=20.0)
     transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.3))
@@ -98,6 +106,7 @@ def test_model_mismatch_refuses_commands(sim_bus):
         master.shutdown(stop_motors=False)
 
 
+@pytest.mark.pymodbus
 def test_refused_polls_show_as_such_and_never_as_current_values(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('main').reading is not None, 3.0)
     model = sim_bus.devices[20].model
@@ -117,6 +126,7 @@ def test_refused_polls_show_as_such_and_never_as_current_values(bus, sim_bus):
     assert bus.snapshot('main').poll_failure == ''
 
 
+@pytest.mark.pymodbus
 def test_a_single_busy_refusal_is_counted_not_a_change_of_state(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('aux').reading is not None, 3.0)
     events = len(bus.events)
@@ -127,7 +137,7 @@ def test_a_single_busy_refusal_is_counted_not_a_change_of_state(bus, sim_bus):
                 kind(e) in ('error', 'offline')]
 
 
-@pytest.mark.parametrize('engine', SERIAL_ENGINES)
+@pytest.mark.parametrize('engine', marked_params(SERIAL_ENGINES))
 def test_a_bus_restarted_on_a_pty_with_parity_e_is_online_every_time(sim_bus, engine):
     # A restarted node opened the simulator's pty with parity E once; every later start
     # found the link offline with "(22, 'Invalid argument')".

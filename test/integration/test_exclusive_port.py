@@ -5,6 +5,7 @@ from drive_bridge.errors import LinkDown
 from drive_bridge.protocol.requests import ReadCoils
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.transport.port_owner import lock_holders
+from pymodbus_use import marked_params
 import pytest
 
 
@@ -26,7 +27,8 @@ def transport(line, engine='native', protocol='modbus_rtu'):
     return config.make_transport()
 
 
-OPENERS = [('modbus_rtu', 'native'), ('modbus_rtu', 'pymodbus'), ('ap_ascii', None)]
+OPENERS = marked_params([('modbus_rtu', 'native'), ('modbus_rtu', 'pymodbus'), ('ap_ascii', None)],
+                        lambda opener: opener[1] == 'pymodbus')
 
 
 @pytest.mark.parametrize('first', OPENERS)

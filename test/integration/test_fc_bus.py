@@ -13,6 +13,7 @@ from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from drive_bridge.transport.protocols import SERIAL_ENGINES
 from integration_helpers import wait_until
+from pymodbus_use import marked_params
 import pytest
 
 FAST = {'fc': {'ramp_up_s': 0.5, 'ramp_down_s': 0.5}}
@@ -27,9 +28,10 @@ def sim():
     server.stop()
 
 
-@pytest.fixture(params=SERIAL_ENGINES)
+@pytest.fixture(params=marked_params(SERIAL_ENGINES))
 def transport(sim, request):
-    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=0.2),
+    # 1 s: no test here times a reply, and a busy machine can hold the simulator up
+    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=1.0),
                                {'serial_engine': request.param})
     transport.connect()
     yield transport
@@ -66,6 +68,7 @@ def test_exception_04_then_register_7(transport):
     assert transport.execute(1, ReadRegisters(6, 1)) == [1]  # no write access
 
 
+@pytest.mark.pymodbus
 @pytest.mark.parametrize('parity', ['E', 'O'])
 def test_fc_over_socket_url_with_parity(parity):
     server = make_sim_server({1: 'fc51'})
@@ -102,6 +105,7 @@ def state(bus):
     return reading.state if reading else None
 
 
+@pytest.mark.pymodbus  # the bus fixture's transport
 def test_drive_and_starter_on_one_bus(bus, sim):
     drive = sim.devices[1].model
     assert wait_until(lambda: drive.parameters[803] == 20 and drive.parameters[804] == 2, 2.0)
@@ -123,6 +127,7 @@ def test_drive_and_starter_on_one_bus(bus, sim):
     assert drive.output_pct == 0.0
 
 
+@pytest.mark.pymodbus
 def test_alarm_trip_reset_and_parameters(bus, sim):
     drive = sim.devices[1].model
     with sim.lock:

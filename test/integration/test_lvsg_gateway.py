@@ -7,6 +7,8 @@ from drive_bridge.sim.mcd_model import READY, RUNNING, TRIPPED
 from integration_helpers import wait_until
 import pytest
 
+pytestmark = pytest.mark.pymodbus  # Modbus TCP and RTU over TCP run through pymodbus
+
 SLAVES = {0: ('mcd202', 100, 'extended'), 10: ('mcd201', 110, 'basic')}
 DEVICES = {
     'conveyor': {'family': 'lvsg', 'model': 'auto', 'address': 1, 'poll_rate': 20.0,

@@ -20,9 +20,13 @@ from drive_bridge.sim.pty_link import PtyLink
 from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.fc_protocol import FcProtocolTransport
 from drive_bridge.transport.link import LinkSettings
+from pymodbus_use import marked_params
 import pytest
 from safety_helpers import Babbler, MCD_START, McdProbe, sim_pty_master, spy_starts, wait_for
 
+# One worker runs these one after the other (scripts/test.sh: --dist loadgroup): each babbler is
+# a process that writes as fast as it can, and several at once held reads for seconds.
+pytestmark = pytest.mark.xdist_group('babbling_lines')
 TIMEOUT_S = 0.3
 PATTERNS = {'ff': b'\xff' * 16, 'frames': b'\x14\x03\x0c' * 6, 'nak': b'\x15' * 8,
             'stx': b'\x02\x06\x07\x02' * 4}
@@ -75,7 +79,7 @@ def run_reads(kind: str, port: str, count: int = 5):
     return outcomes
 
 
-TRANSPORTS = ('native', 'pymodbus', 'ap_ascii', 'fc_protocol')
+TRANSPORTS = marked_params(('native', 'pymodbus', 'ap_ascii', 'fc_protocol'))
 
 
 @pytest.mark.parametrize('babbling_line', list(PATTERNS), indirect=True)

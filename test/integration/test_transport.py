@@ -20,6 +20,7 @@ from drive_bridge.transport.link import PortFraming
 from drive_bridge.transport.modbus import LinkSettings
 from drive_bridge.transport.protocols import SERIAL_ENGINES
 from drive_bridge.transport.serial_port import direct_descriptor
+from pymodbus_use import marked_params
 import pytest
 import serial
 
@@ -32,7 +33,7 @@ def transport_for(settings, engine='pymodbus'):
     return transport
 
 
-@pytest.fixture(params=SERIAL_ENGINES)
+@pytest.fixture(params=marked_params(SERIAL_ENGINES))
 def pty_transport(sim_bus, request):
     transport = transport_for(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.2),
                               request.param)
@@ -84,7 +85,7 @@ def test_corrupted_reply_is_a_bad_frame(pty_transport, sim_bus):
     assert pty_transport.execute(20, ReadRegisters(2, 6))
 
 
-@pytest.mark.parametrize('engine', SERIAL_ENGINES)
+@pytest.mark.parametrize('engine', marked_params(SERIAL_ENGINES))
 def test_a_pty_with_parity_e_opens_every_time_and_the_log_says_why_once(
         sim_bus, tmp_path, engine, caplog):
     # Linux clears the parity a pty client asks for and refuses the next open that asks
@@ -119,7 +120,7 @@ def test_the_native_engine_opens_a_pty_8n1_for_8e1_and_keeps_the_8e1_character_t
                           {'serial_engine': 'native'}).framing() == PortFraming('N', 2)
 
 
-@pytest.mark.parametrize('engine', SERIAL_ENGINES)
+@pytest.mark.parametrize('engine', marked_params(SERIAL_ENGINES))
 def test_missing_port_is_link_down_with_its_name(engine):
     transport = make_transport(LinkSettings(port='/dev/ttyDOESNOTEXIST'),
                                {'serial_engine': engine})
@@ -145,6 +146,7 @@ def test_native_engine_garbage_wrong_address_and_truncation(sim_bus):
         transport.close()
 
 
+@pytest.mark.pymodbus  # both TCP protocols run through pymodbus
 @pytest.mark.parametrize('framing, protocol', [('mbap', 'modbus_tcp'),
                                                ('rtu', 'rtu_over_tcp')])
 def test_tcp_protocols(framing, protocol):
@@ -162,7 +164,7 @@ def test_tcp_protocols(framing, protocol):
         server.stop()
 
 
-@pytest.mark.parametrize('engine', SERIAL_ENGINES)
+@pytest.mark.parametrize('engine', marked_params(SERIAL_ENGINES))
 @pytest.mark.parametrize('parity', ['E', 'O'])
 def test_even_and_odd_parity_serial_settings_over_socket_url(parity, engine):
     # A pty rejects parity E/O; pyserial's socket:// carries the serial client's settings
@@ -270,6 +272,7 @@ def native_transport_answered(reply: bytes, pause_s: Optional[float] = None):
         os.close(slave_fd)
 
 
+@pytest.mark.realtime  # the transport must wake before the answering thread writes on
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='VMIN and select: Linux')
 @pytest.mark.parametrize('pause_s', [0.0, 0.002])
 def test_native_engine_wakes_twice_for_a_reply_however_its_bytes_arrive(pause_s, monkeypatch):

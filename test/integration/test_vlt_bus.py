@@ -9,6 +9,8 @@ from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
 from integration_helpers import wait_until
 import pytest
 
+pytestmark = pytest.mark.pymodbus  # every test here runs on ModbusTransport
+
 
 @pytest.fixture
 def sim():
@@ -36,7 +38,7 @@ def test_option_card_exception_codes_come_back_as_they_are(sim):
 
 def test_two_vlt_models_on_one_bus(sim):
     config = build_config(
-        {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2, 'devices': ['fan', 'pump']},
+        {'port': sim.pty_path, 'parity': 'N', 'timeout': 1.0, 'devices': ['fan', 'pump']},
         {'fan': {'family': 'vlt', 'model': 'vlt6000', 'address': 1, 'poll_rate': 20.0,
                  'speed_reference': 40.0, 'comms_timeout': 1.5,
                  'drive_link_timeout': 0.8},

@@ -1,5 +1,5 @@
 """
-The soak through the node, 60 s (bench/soak_node.py runs it longer).
+The soak through the node: 20 s, and 60 s with ``-m soak`` (bench/soak_node.py runs longer).
 
 ``drive_bridge_node`` in a subprocess on the soak line (faults, outages, trips), random
 service calls (several in flight, one per device) and references from an rclpy client,
@@ -12,8 +12,9 @@ from soak_node import LEFT_RUNNING, NodeSoakSettings, run_node_soak
 
 
 @pytest.mark.timeout(400)
-def test_node_soak_meets_the_invariants_and_sigterm_stops_what_it_started(tmp_path):
-    report = run_node_soak(NodeSoakSettings(duration_s=60.0, seed=3), str(tmp_path))
+@pytest.mark.parametrize('duration_s', [20.0, pytest.param(60.0, marks=pytest.mark.soak)])
+def test_node_soak_meets_the_invariants_and_sigterm_stops_what_it_started(tmp_path, duration_s):
+    report = run_node_soak(NodeSoakSettings(duration_s=duration_s, seed=3), str(tmp_path))
     text = '\n'.join(report.lines(most=10))
     print(text)
     assert report.exit_code == 0, report.output[-4000:]

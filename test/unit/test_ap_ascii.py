@@ -129,11 +129,9 @@ def test_a_trip_code_is_taken_only_from_the_poll_that_asks_for_it():
     # Issue 26's audit: the trip code (C18) is the MCD's only slow readout over AP ASCII. It is
     # asked for in every poll whose status shows a trip, after the status; in the others it
     # is not, and the trip read before never names the state of a later poll.
-    now_s = [0.0]
-    profile = McdAsciiProfile('mcd500', slow_readouts=SlowReadouts(10.0, lambda: now_s[0]))
+    profile = McdAsciiProfile('mcd500', slow_readouts=SlowReadouts(10.0))
     drive_cycle(profile, [0x43, 255, 80, 40])  # the slow readouts' turn: C18 asked
-    now_s[0] = 1.0
-    requests, tripped = drive_cycle(profile, [0x46, 2, 0, 106])
+    requests, tripped = drive_cycle(profile, [0x46, 2, 0, 106], now_s=1.0)
     assert requests[:2] == [AsciiRequest('C22', 'status'), AsciiRequest('C18', 'status')]
     assert (tripped.state, tripped.trip_code) == ('tripped', 2)
     requests, reset = drive_cycle(profile, [0x41, 0, 100])  # reset at the starter

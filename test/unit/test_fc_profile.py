@@ -16,7 +16,7 @@ from drive_bridge.protocol.requests import (
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.fc_model import FcModel, FcSimConfig
 from drive_bridge.sim.fc_parameter_store import ParameterError
-from fakes import drive_cycle, FakeClock
+from fakes import drive_cycle
 import pytest
 
 
@@ -178,7 +178,7 @@ def test_the_keepalive_is_built_when_it_is_sent():
     class Switching(FixedControl):
         steady = Command.START
     control = Switching(reference_word=0x2000)
-    cycle = profile.poll(control)
+    cycle = profile.poll(control, 0.0)
     Switching.steady = Command.STOP  # a stop went out after the cycle began
     step = next(cycle)
     assert step.request == WriteCoils(0, words.words_to_coils([0x043C, 0x2000]))
@@ -359,9 +359,9 @@ def test_a_start_read_before_the_drive_moves_is_still_starting_once_it_ramps():
 
 # -- the freshest information decides (issue 26) ---------------------------------------------
 def slow_never_due():
-    """Return slow readouts that are never due (their fake clock never moves)."""
-    slow = SlowReadouts(1000.0, FakeClock())
-    slow.due()  # the first poll that asks reads them: that one is gone
+    """Return slow readouts that are never due (for polls at time 0, as drive_cycle's)."""
+    slow = SlowReadouts(1000.0)
+    slow.due(0.0)  # the first poll that asks reads them: that one is gone
     return slow
 
 

@@ -60,7 +60,7 @@ def image(status: bytes, byte_order='big'):
     return words.bytes_to_registers(status, byte_order)
 
 
-def poll(profile, input_bytes, output_bytes=None, control=None):
+def poll(profile, input_bytes, output_bytes=None, control=None, now_s=0.0):
     """Run one poll cycle; return [(key, request)] and the reading."""
     keys = []
 
@@ -73,7 +73,7 @@ def poll(profile, input_bytes, output_bytes=None, control=None):
             return image(input_bytes)
         keys.append('write')
         return None
-    requests, reading = drive_cycle(profile, answer, control)
+    requests, reading = drive_cycle(profile, answer, control, now_s)
     return list(zip(keys, requests)), reading
 
 
@@ -223,9 +223,9 @@ NO_TRIP_WORD = lvsg.NO_TRIP << 8
 
 
 def slow_never_due():
-    """Return slow readouts that are never due (their fake clock never moves)."""
-    slow = SlowReadouts(1000.0, FakeClock())
-    slow.due()  # the first poll that asks reads them: that one is gone
+    """Return slow readouts that are never due (for polls at time 0, as drive_cycle's)."""
+    slow = SlowReadouts(1000.0)
+    slow.due(0.0)  # the first poll that asks reads them: that one is gone
     return slow
 
 
@@ -258,7 +258,7 @@ def poll_until_state_byte(profile, clock, state_byte, control, **status):
         return None
     for _ in range(10):
         clock.sleep(1.0)
-        _, reading = drive_cycle(profile, reply, control)
+        _, reading = drive_cycle(profile, reply, control, clock.now)
         if reading.details.get('mcd200_state') == str(state_byte & 0x0F):
             return reading
     raise AssertionError(f'state byte {state_byte:#x} never asked for')
@@ -272,7 +272,7 @@ def running_with_a_stale_starting_byte():
     passed a newer request on yet), and the slow readouts' clock stands still.
     """
     clock = FakeClock()
-    profile = ready_mcd202(SlowReadouts(1.0, clock))
+    profile = ready_mcd202(SlowReadouts(1.0))
     start = FixedControl(Command.START)
     poll(profile, answer(2, NO_TRIP_WORD | 1))
     reading = poll_until_state_byte(profile, clock, STATE_STARTING, start, ready=False,

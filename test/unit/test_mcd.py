@@ -260,14 +260,15 @@ def test_model_local_comms_error():
 def test_a_state_and_a_trip_come_from_the_poll_that_reads_them_never_from_40007_40008():
     # Issue 26's audit: 40007/40008 (product, protocol) are the MCD's slow readout, read once
     # a readout period; status and trip code (40003/40004) are read every poll with the rest.
-    now_s = [0.0]
-    profile = mcd.McdProfile('mcd500', slow_readouts=SlowReadouts(10.0, lambda: now_s[0]))
+    profile = mcd.McdProfile('mcd500', slow_readouts=SlowReadouts(10.0))
     requests, tripped = drive_cycle(profile, status_block(status=0x46, trip=2))  # slow: due
     assert requests == [ReadRegisters(address=2, count=6)]
     assert (tripped.state, tripped.trip_code) == ('tripped', 2)
-    now_s[0] = 1.0  # reset at the starter; the slow readouts are not due
-    requests, reading = drive_cycle(profile, [status_block(status=0x41, trip=255)[0][:4]])
+    # At 1 s: reset at the starter; the slow readouts are not due.
+    requests, reading = drive_cycle(profile, [status_block(status=0x41, trip=255)[0][:4]],
+                                    now_s=1.0)
     assert requests == [ReadRegisters(address=2, count=4)]
     assert (reading.state, reading.trip_code, reading.trip_name) == ('ready', 0, '')
-    _, reading = drive_cycle(profile, [status_block(status=0x44)[0][:4]])  # a soft stop
+    _, reading = drive_cycle(profile, [status_block(status=0x44)[0][:4]],
+                             now_s=1.0)  # a soft stop
     assert reading.state == 'stopping' and reading.details['product_type'] == 'MCD 500'

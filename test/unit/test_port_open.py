@@ -59,6 +59,7 @@ def test_the_fc_protocol_names_the_settings_refused_too(port):
     assert str(raised.value) == refused(port, 9600, 'O', 2)
 
 
+@pytest.mark.pymodbus
 def test_the_pymodbus_engine_names_the_settings_refused_though_pymodbus_only_logs_it(
         port, monkeypatch):
     monkeypatch.setattr(serial, 'serial_for_url', refusing)  # pymodbus opens through it too

@@ -1,5 +1,6 @@
 """The slow readouts come at most once a readout period; the fast values every poll."""
 
+from drive_bridge.bus.master import BusMaster
 from drive_bridge.config import build_config
 from drive_bridge.devices import fc, mcd
 from drive_bridge.devices.contracts import Freshness, SlowReadouts
@@ -8,24 +9,24 @@ from drive_bridge.devices.lvsg import LvsgProfile
 from drive_bridge.devices.mcd_ascii import McdAsciiProfile
 from drive_bridge.protocol import lvsg, words
 from drive_bridge.protocol.requests import AsciiRequest, ReadCoils, ReadRegisters
-from fakes import drive_cycle, FakeClock
+from drive_bridge.transport.base import Transport
+from fakes import drive_cycle, FakeClock, run_for
 
 PRODUCT_MCD500 = (7 << 3) | 1
 
 
 def slow(period_s):
-    clock = FakeClock()
-    return clock, SlowReadouts(period_s, clock)
+    return FakeClock(), SlowReadouts(period_s)
 
 
 def test_slow_readouts_are_due_once_a_period():
     clock, schedule = slow(1.0)
-    assert schedule.due() and not schedule.due()
+    assert schedule.due(clock.now) and not schedule.due(clock.now)
     clock.now += 0.99
-    assert not schedule.due()
+    assert not schedule.due(clock.now)
     clock.now += 0.02
-    assert schedule.due()
-    assert all(SlowReadouts(0.0).due() for _ in range(3))  # period 0: every poll
+    assert schedule.due(clock.now)
+    assert all(SlowReadouts(0.0).due(0.0) for _ in range(3))  # period 0: every poll
 
 
 def fc_answer(request):
@@ -40,7 +41,7 @@ def test_an_fc51_reads_status_and_current_every_poll_and_one_slow_readout_a_peri
     profile._identified = True
     polls = []
     for _ in range(10):  # ten polls in 0.5 s
-        polls.append(drive_cycle(profile, fc_answer)[0])
+        polls.append(drive_cycle(profile, fc_answer, now_s=clock.now)[0])
         clock.now += 0.05
     assert all(poll[:2] == [ReadCoils(32, 32), ReadRegisters(16139, 2)] for poll in polls)
     assert [len(poll) for poll in polls] == [3] + [2] * 9  # one slow readout in the period
@@ -55,13 +56,13 @@ def test_an_mcd_reads_its_product_registers_only_when_due_once_the_model_is_know
     profile = mcd.McdProfile('auto', slow_readouts=schedule)
     counts = []
     for _ in range(5):
-        requests, reading = drive_cycle(profile, mcd_answer)
+        requests, reading = drive_cycle(profile, mcd_answer, now_s=clock.now)
         counts.append(requests[0].count)
         clock.now += 0.5
     assert counts == [6, 4, 4, 4, 6] and profile.model == 'mcd500'
     assert reading.details['product_type'] == 'MCD 500'  # kept from the last read
     profile.on_offline()
-    assert drive_cycle(profile, mcd_answer)[0][0].count == 6  # back: read them again
+    assert drive_cycle(profile, mcd_answer, now_s=clock.now)[0][0].count == 6  # back: again
 
 
 def test_ap_ascii_asks_for_the_trip_code_only_when_tripped_or_due():
@@ -95,7 +96,7 @@ def test_lvsg_current_and_temperature_take_turns_product_and_state_once_a_period
 
         def answer(request, image=image):
             return image if request == ReadRegisters(0, 3) else [0, 0]
-        drive_cycle(profile, answer)
+        drive_cycle(profile, answer, now_s=clock.now)
         clock.now += 0.1
     assert requests[:4] == [1, 2, 3, 4]
     assert requests.count(3) >= 4 and requests.count(4) >= 4
@@ -106,6 +107,48 @@ def test_the_readout_period_is_a_device_setting_of_every_family():
     device = {'family': 'fc', 'address': 1, 'readout_period': 2.5}
     config = build_config({'devices': ['a']}, {'a': device})
     assert config.devices[0].make_spec().profile.slow_readouts.period_s == 2.5
+
+
+class McdOnAFakeClock(Transport):
+    """An MCD 500 at address 1 that answers every read 20 ms later on ``clock``."""
+
+    def __init__(self, link, clock):
+        super().__init__(link)
+        self.clock = clock
+        self.reads = []  # (time, registers read)
+
+    @property
+    def connected(self):
+        return True
+
+    def connect(self):
+        pass
+
+    def close(self):
+        pass
+
+    def execute(self, unit, transaction):
+        self.reads.append((self.clock.now, transaction.count))
+        self.clock.now += 0.02
+        return mcd_answer(transaction)
+
+
+def test_a_bus_on_a_virtual_clock_reads_the_slow_readouts_by_its_own_clock():
+    # A profile made from the configuration, on a bus whose clock is not the wall clock
+    # (the virtual soak's line, these tests): once a readout period of the bus's time, not
+    # of wall time (which barely moves while the fake clock runs 10 s).
+    device = {'family': 'mcd', 'model': 'mcd500', 'address': 1, 'readout_period': 1.0,
+              'poll_rate': 5.0}
+    config = build_config({'devices': ['a']}, {'a': device})
+    clock = FakeClock()
+    transport = McdOnAFakeClock(config.link, clock)
+    bus = BusMaster(transport, [config.devices[0].make_spec()], config.timing,
+                    listener=lambda event: None, clock=clock, sleep=clock.sleep)
+    run_for(bus, clock, 10.0)
+    slow_reads = [time_s for time_s, count in transport.reads if count == 6]
+    assert len(transport.reads) >= 45
+    assert len(slow_reads) in (10, 11), transport.reads
+    assert all(later - earlier > 1.0 - 1e-9 for earlier, later in zip(slow_reads, slow_reads[1:]))
 
 
 def test_a_value_read_counts_only_from_the_poll_its_fast_signal_took_its_value():

@@ -14,14 +14,19 @@ def test_every_protocol_has_its_transport_factory_and_nothing_else_has_one():
     assert set(TRANSPORTS) == set(PROTOCOLS)
 
 
+def pymodbus_case(*case):
+    """Return a case that builds a pymodbus transport, marked for the pymodbus tier."""
+    return pytest.param(*case, marks=pytest.mark.pymodbus)
+
+
 @pytest.mark.parametrize('protocol, options, expected', [
     ('modbus_rtu', {}, RtuSerialTransport),
     ('modbus_rtu', {'serial_engine': 'native'}, RtuSerialTransport),
-    ('modbus_rtu', {'serial_engine': 'pymodbus'}, ModbusTransport),
+    pymodbus_case('modbus_rtu', {'serial_engine': 'pymodbus'}, ModbusTransport),
     ('ap_ascii', {}, ApAsciiTransport),
     ('fc_protocol', {}, FcProtocolTransport),
-    ('modbus_tcp', {}, ModbusTransport),
-    ('rtu_over_tcp', {}, ModbusTransport),
+    pymodbus_case('modbus_tcp', {}, ModbusTransport),
+    pymodbus_case('rtu_over_tcp', {}, ModbusTransport),
 ])
 def test_the_transport_of_each_protocol_is_built_without_opening_the_link(
         protocol, options, expected):

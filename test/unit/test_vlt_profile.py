@@ -11,7 +11,7 @@ from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.requests import ReadRegisters, WriteCoil, WriteRegister
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.fc_model import FcModel, FcSimConfig
-from fakes import drive_cycle, FakeClock
+from fakes import drive_cycle
 import pytest
 
 
@@ -151,8 +151,9 @@ def test_option_card_sim_exceptions_and_text_mode():
 
 def test_the_alarm_word_agrees_with_the_simulated_drive_after_a_reset():
     """A stale alarm word is never published: after a reset it is read again (issue 26)."""
-    slow = SlowReadouts(1000.0, FakeClock())
-    slow.due()  # never due again: the alarm word is read only because of the trip bits
+    slow = SlowReadouts(1000.0)
+    slow.due(0.0)  # never due again at time 0 (drive_cycle's): the alarm word is read
+    # only because of the trip bits
     profile = DriveProfile(vlt.DATA, 'vlt6000', slow_readouts=slow)
     device = FcSimDevice(FcModel(FcSimConfig(model='vlt6000')))
 
