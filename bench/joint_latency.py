@@ -19,8 +19,9 @@ next one (one cycle of the line, from that drive's control write to its next, by
 log; a cycle with a slow readout in it is longer, so the bound takes the 99th percentile of
 the cycles, as the latency's) and for that write's transaction (request, reply and both
 silences, median). Prints p50, p99 and the largest latency per configuration, the bound,
-whether p99 is within it and within the stricter median cycle + one transaction, and how many messages a control write skipped: one that started more than 5 ms after the
-message without carrying it (the reference must go with the drive's next poll: 0).
+whether p99 is within it and within the stricter median cycle + one transaction, and how
+many messages a control write skipped: one that started more than 5 ms after the message
+without carrying it (the reference must go with the drive's next poll: 0).
 Run: .venv/bin/python bench/joint_latency.py [steps] [--configs modbus_rtu:38400:2 ...]
 """
 
