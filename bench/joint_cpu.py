@@ -133,6 +133,7 @@ def receiver_main() -> None:
     spun by rclpy's EventsExecutor: what rclpy and Fast DDS cost per message on this
     machine before any of the node's own work (the floor of the commands' cost).
     """
+    from rclpy.executors import ExternalShutdownException
     from rclpy.experimental import EventsExecutor
     from rclpy.parameter import Parameter
     rclpy.init()
@@ -146,8 +147,11 @@ def receiver_main() -> None:
     executor = EventsExecutor()
     executor.add_node(node)
     print('receiver ready', flush=True)
-    while rclpy.ok():
-        executor.spin_once(timeout_sec=0.5)
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.5)
+    except (ExternalShutdownException, KeyboardInterrupt):
+        pass  # stopped by the bench (SIGINT/SIGTERM)
 
 
 def run_floor(window_s: float) -> Dict:
