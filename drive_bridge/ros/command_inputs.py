@@ -86,8 +86,11 @@ class CommandInputs:
 
     def stop(self) -> bool:
         """End the commands thread and wait for it; return whether it ended (idempotent)."""
-        thread, self._thread = self._thread, None
-        return thread.stop() if thread is not None else True
+        thread = self._thread
+        if thread is None or not thread.stop():
+            return thread is None
+        self._thread = None
+        return True
 
     def destroy_node(self) -> None:
         """Stop the thread and destroy the commands node."""

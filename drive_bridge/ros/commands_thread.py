@@ -49,6 +49,7 @@ class CommandsThread:
         """Start spinning ``node`` (its subscriptions are made already)."""
         self._node = node
         self._stop = threading.Event()
+        self._stopping = threading.Lock()  # one stop at a time (exit signal and lifecycle)
         self.executor = make_executor(node)
         self.executor.add_node(node)
         self._thread: Optional[threading.Thread] = threading.Thread(
@@ -61,21 +62,23 @@ class CommandsThread:
 
         After a True return no callback of the node runs or will run. A callback that does
         not return within ``timeout_s`` (none of them waits for anything) leaves the thread
-        running: False, said on stderr.
+        running: False, said on stderr, and the next call waits for it again.
         """
-        thread, self._thread = self._thread, None
-        if thread is None:
+        with self._stopping:
+            thread = self._thread
+            if thread is None:
+                return True
+            self._stop.set()
+            self.executor.wake()
+            thread.join(timeout_s)
+            if thread.is_alive():
+                print(f'[drive_bridge] {THREAD_NAME}: a command callback did not return within '
+                      f'{timeout_s:g} s', file=sys.stderr, flush=True)
+                return False
+            self._thread = None
+            self.executor.remove_node(self._node)
+            self.executor.shutdown(timeout_sec=0.0)
             return True
-        self._stop.set()
-        self.executor.wake()
-        thread.join(timeout_s)
-        if thread.is_alive():
-            print(f'[drive_bridge] {THREAD_NAME}: a command callback did not return within '
-                  f'{timeout_s:g} s', file=sys.stderr, flush=True)
-            return False
-        self.executor.remove_node(self._node)
-        self.executor.shutdown(timeout_sec=0.0)
-        return True
 
     def _spin(self) -> None:
         """Spin until :meth:`stop`; a context shut down under the executor ends it quietly."""
