@@ -180,6 +180,11 @@ class RosClient:
     def publish_reference(self, name: str, percent: float) -> None:
         self.reference_publishers[name].publish(Float32(data=float(percent)))
 
+    def wait_fresh_diagnostics(self) -> bool:
+        """Wait for a /diagnostics message begun after this call (the second one from now)."""
+        count = len(self.messages['/diagnostics'])
+        return self.spin_until(lambda: len(self.messages['/diagnostics']) > count + 1)
+
     def diagnostics(self, name: str):
         """Return the latest status of device ``name`` (namespaced nodes: full name)."""
         wanted = f'{self.prefix}drive_bridge: {name}' if self.prefix else \

@@ -1,9 +1,9 @@
 """
 The bus master: one thread owns one bus and everything that happens on it.
 
-:class:`BusMaster` is what the node, the CLI's soak and the tests hold: the thread-safe API
-and the bus thread. It builds the bus's parts and hands each the others it needs through
-the interfaces in :mod:`.seams`; every part has one job:
+:class:`BusMaster` is what the node, the CLI and the tests (the soak harness too) hold: the
+thread-safe API and the bus thread. It builds the bus's parts and hands each the others it
+needs through the interfaces in :mod:`.seams`; every part has one job:
 
 - :mod:`.table`: the devices, the lock over their state, snapshots for other threads;
 - :mod:`.outbox`: events (:mod:`.events`) in order, given to the listener later;
@@ -245,8 +245,9 @@ class BusMaster:
         """
         Do the next piece of bus work, then wait what it asks (at most ``max_wait_s``).
 
-        For callers that drive the bus without its thread (stop_all, the soak, the benches):
-        the wait is the master's ``sleep``, so a fake clock moves. Returns the wait asked.
+        For callers that drive the bus without its thread (stop_all, the soak harness, the
+        benches): the wait is the master's ``sleep``, so a fake clock moves. Returns the wait
+        asked.
         """
         return self._scheduler.run_step(max_wait_s)
 

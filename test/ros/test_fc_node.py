@@ -42,6 +42,8 @@ def drive(sim, node):
     node.set_parameter('conv.speed_reference', 40.0)
     with sim.lock:
         model.local_mode = False
+    assert node.spin_until(lambda: 'local operation' not in (  # the bridge has seen it too
+        node.diagnostics('conv') or DiagnosticStatus()).message)
     if model.tripped or model.output_pct:
         node.call('conv', 'reset')
         node.call('conv', 'coast_stop')
@@ -142,7 +144,9 @@ def test_local_operation_is_refused_with_its_reason(node, drive, sim):
 
 
 def test_setup_writes_and_diagnostics(node, drive):
-    assert drive.parameters[803] == 20 and drive.parameters[804] == 2
+    # written once the drive is online (the test may be the module's first on its worker)
+    assert node.spin_until(lambda: drive.parameters[803] == 20 and drive.parameters[804] == 2)
+    assert node.wait_fresh_diagnostics()  # published after the writes: the drive's values now
     status = node.diagnostics('conv')
     assert status.hardware_id == 'fc fc51 address 1'
     values = {kv.key: kv.value for kv in status.values}

@@ -141,6 +141,9 @@ def wheels(sim, node, joints):
     """Yield the two simulated drives; stop, reset and re-arm everything after each test."""
     drives = (sim.devices[1].model, sim.devices[2].model)
     joints.sending = True
+    with sim.lock:  # each test sees the words written in its own time (tests share the drives)
+        for drive in drives:
+            drive.control_words_received.clear()
     yield drives
     joints.sending = True
     joints.command(left_wheel_joint=0.0, right_wheel_joint=0.0)
@@ -179,7 +182,7 @@ def _auto_start_mode(node, joints, device, joint, delay_s=1.0):
     _set(node, f'{device}.command_mode', 'auto_start')
     _set(node, f'{device}.auto_stop_delay', delay_s)
     joints.command(**{joint: 0.0})
-    _fresh_diagnostics(node)
+    assert node.wait_fresh_diagnostics()
     assert node.spin_until(lambda: values(node, device).get('auto_start') == 'armed')
 
 
@@ -277,11 +280,6 @@ def _counter(client, device, key):
     return int(values(client, device).get(key, '0'))
 
 
-def _fresh_diagnostics(node):
-    count = len(node.messages['/diagnostics'])
-    assert node.spin_until(lambda: len(node.messages['/diagnostics']) > count + 1)
-
-
 def test_auto_start_starts_on_nonzero_and_stops_after_a_held_zero(node, joints, wheels):
     left, _ = wheels
     _auto_start_mode(node, joints, 'left', WHEELS[0], 0.5)
@@ -312,7 +310,7 @@ def test_auto_start_starts_on_nonzero_and_stops_after_a_held_zero(node, joints, 
     joints.spin_for(0.5)
     assert joints.spin_until(lambda: joints.near(WHEELS[0], 3.0, 0.002))
     assert 0x043C not in left.control_words_received and left.control_word == 0x047C
-    _fresh_diagnostics(node)
+    assert node.wait_fresh_diagnostics()
     assert _counter(node, 'left', 'auto_stops') == stops
 
 
@@ -337,7 +335,7 @@ def test_auto_start_is_not_retried_after_a_failure_nor_after_a_trip(node, joints
         left.local_mode = True  # the drive ignores the bus: the start is refused
     assert node.spin_until(lambda: 'local operation' in (
         node.diagnostics('left') or DiagnosticStatus()).message)
-    _fresh_diagnostics(node)
+    assert node.wait_fresh_diagnostics()
     failures = _counter(node, 'left', 'auto_start_failures')
     joints.command(left_wheel_joint=5.0)
     assert node.spin_until(lambda: _counter(node, 'left', 'auto_start_failures') ==
@@ -390,11 +388,14 @@ def _publish_once(joints, names, velocities=None):
 
 def test_bad_commands_are_refused_and_nothing_is_sent(node, joints, wheels):
     left, right = wheels
+    for device in DEVICES:  # a stop: the stop image is kept alive with the reference in force
+        assert node.call(device, 'stop').success
     joints.command(left_wheel_joint=2.0, right_wheel_joint=2.0)
-    assert joints.spin_until(lambda: left.reference_word == 0x0666)
+    assert joints.spin_until(
+        lambda: left.reference_word == 0x0666 and right.reference_word == 0xF99A)
     joints.sending = False
     joints.spin_for(0.2)
-    _fresh_diagnostics(node)
+    assert node.wait_fresh_diagnostics()
     rejected = _counter(node, 'left', 'rejected_references')
     before = command_counters(node)
     bad = [math.nan, math.inf, -math.inf, 2 * SCALE, -2 * SCALE - 0.5, 1e308]
@@ -457,7 +458,7 @@ def test_malformed_bytes_say_why_in_one_line_send_nothing_and_the_node_lives(
 def test_a_monitor_only_joint_takes_no_command_and_nothing_is_written(node, joints, wheels):
     _, right = wheels
     _set(node, 'right.allow_control', False)
-    _fresh_diagnostics(node)
+    assert node.wait_fresh_diagnostics()
     rejected = _counter(node, 'right', 'rejected_references')
     words = len(right.control_words_received)
     reference = right.reference_word
