@@ -432,11 +432,14 @@ def _malformed_commands():
 def test_malformed_bytes_say_why_in_one_line_send_nothing_and_the_node_lives(
         node, joints, wheels):
     left, right = wheels
+    for device in DEVICES:  # a stop: the stop image is kept alive with the reference in force
+        assert node.call(device, 'stop').success
     joints.command(left_wheel_joint=2.0, right_wheel_joint=2.0)
-    assert joints.spin_until(lambda: left.reference_word == 0x0666)
+    assert joints.spin_until(
+        lambda: left.reference_word == 0x0666 and right.reference_word == 0xF99A)
     joints.sending = False
     joints.spin_for(1.1)  # the log throttle's period: the first malformed message is logged
-    _fresh_diagnostics(node)
+    assert node.wait_fresh_diagnostics()
     before = int(command_counters(node)['messages_malformed'])
     control = (left.control_word, right.control_word)
     malformed = _malformed_commands()
