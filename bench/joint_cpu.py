@@ -6,21 +6,30 @@ line allows (``poll_rate`` 100) on one line paced by the wire pacer (8E1 timing,
 character). A client in a child process behaves as ``JointStateTopicSystem`` in a 100 Hz
 controller manager: it subscribes to ``~/joint_states`` (sensor-data QoS) and publishes one
 JointState with the 8 velocity commands every 10 ms (changing a little each time, as a
-controller's would) to ``~/joint_commands``. The node's CPU is read from ``/proc`` over a
-fixed window (see ``node_cpu.py``), in four cases:
+controller's would) to ``~/joint_commands``. The node's CPU is read per thread from the
+scheduler's accounting over a fixed window (``thread_cpu.py``), in three cases:
 
 - ``not joints``: the same drives without velocity_scale, no client (the baseline);
 - ``states only``: joints, the client subscribed, no commands;
-- ``commands, per joint``: 100 Hz commands, one JointState per reading (the node's way);
-- ``commands, batched``: 100 Hz commands, one JointState per round of the 8 joints
-  (``drive_bridge.ros.joints.interface.BATCH_STATES``, set by this bench in the node
-  process).
+- ``commands``: the client also sends its 100 Hz commands.
 
-Also printed: the bus transactions per second (the pacer's frame log): 100 Hz commands
-must not add any. Each case is run several times, in turn; the table gives the median and
-the range. Run: .venv/bin/python bench/joint_cpu.py [window s] [baud] [runs]
+What the commands add is ``commands`` minus ``states only`` of the same round. Also
+printed: the bus transactions per second (the pacer's frame log; commands must not add
+any), the states received and the commands sent per second, and the CPU of the node's
+threads: the bus thread, the executor (``ros-executor``: services, parameters, timers), the
+commands thread (``ros-commands``: ``~/joint_commands`` and ``speed_reference``; on the
+executor before issue 29) and Fast DDS's threads. Each case is run several times, the cases
+in turn; the table gives the median and the range. ``--compare LABEL=DIR`` (repeatable)
+runs the node from each directory's ``drive_bridge`` package in turn (``LABEL=`` alone: the
+installed one), so that two versions meet the same noise.
+``--floor`` also measures a bare rclpy process that takes the same commands as the node's
+commands thread does (its own node, serialized, EventsExecutor) with an empty callback:
+what rclpy and Fast DDS cost per message before any work of the node's.
+Run: .venv/bin/python bench/joint_cpu.py [window s] [baud] [runs] [--compare LABEL=DIR ...]
+[--floor]
 """
 
+import argparse
 import json
 import math
 import os
@@ -31,28 +40,31 @@ import time
 from typing import Dict, List, Optional
 
 from drive_bridge.sim.wire_pacer import LineTiming
-from node_cpu import cpu_ticks, TICKS_PER_S, wait_until_ready
+from node_cpu import wait_until_ready
 from paced_line import (
-    node_bus, NodeProcess, PacedSimulator, ros_environment, simulator_devices, wait_for)
+    conditions, node_bus, NodeProcess, PacedSimulator, ros_environment, simulator_devices,
+    versions, wait_for)
+import thread_cpu
 
 ros_environment()
-import rclpy  # noqa: E402 - after the environment it reads
+import rclpy  # noqa: E402, I100 - after the environment it reads
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 JOINTS = 8
 SCALE = 20.0
+COMMAND_PERIOD_S = 0.01  # the controller manager's 100 Hz
 WARM_UP_S = 2.0
-NODE_MAIN = ('import sys, drive_bridge.ros.joints.interface as joints; '
-             'joints.BATCH_STATES = {batch}; '
-             'from drive_bridge.ros.process import main; sys.exit(main())')
+THREADS = ('drive-bridge-bus', 'ros-executor', 'ros-commands')
+CASES = (('not joints', False, None), ('states only', True, 'listen'),
+         ('commands', True, 'commands'))
 
 
-def devices(joints: bool) -> Dict[str, Dict]:
-    """Return 8 FC 51 device blocks, joints or not, each started at 25 % by its reference."""
+def devices(joints: bool, count: int = JOINTS) -> Dict[str, Dict]:
+    """Return ``count`` FC 51 device blocks, joints or not, each at a 25 % reference."""
     blocks = {}
-    for unit in range(1, JOINTS + 1):
+    for unit in range(1, count + 1):
         block = {'family': 'fc', 'model': 'fc51', 'address': unit, 'poll_rate': 100.0,
                  'speed_reference': 25.0}
         if joints:
@@ -94,7 +106,7 @@ def client_main(mode: str, seconds: float) -> None:
     names = [f'wheel{unit}' for unit in range(1, JOINTS + 1)]
 
     def write() -> None:
-        phase = counts['commands'] * 0.01
+        phase = counts['commands'] * COMMAND_PERIOD_S
         message = JointState(name=names, velocity=[5.0 + 0.5 * math.sin(phase + index)
                                                    for index in range(JOINTS)])
         message.header.stamp = node.get_clock().now().to_msg()
@@ -102,7 +114,7 @@ def client_main(mode: str, seconds: float) -> None:
         counts['commands'] += 1
 
     if mode == 'commands':
-        node.create_timer(0.01, write)
+        node.create_timer(COMMAND_PERIOD_S, write)
     print('client ready', flush=True)
     started = time.monotonic()
     while time.monotonic() - started < seconds:
@@ -113,13 +125,73 @@ def client_main(mode: str, seconds: float) -> None:
     rclpy.try_shutdown()
 
 
-def run_case(label: str, baudrate: int, window_s: float, joints: bool, client: Optional[str],
-             batch: bool = False) -> Dict:
+def receiver_main() -> None:
+    """
+    Take ``~/joint_commands`` as the node's commands thread does, with an empty callback.
+
+    A node of its own (no parameter services, no /rosout), the subscription serialized,
+    spun by rclpy's EventsExecutor: what rclpy and Fast DDS cost per message on this
+    machine before any of the node's own work (the floor of the commands' cost).
+    """
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.experimental import EventsExecutor
+    from rclpy.parameter import Parameter
+    rclpy.init()
+    node = rclpy.create_node('drive_bridge', enable_rosout=False,
+                             start_parameter_services=False,
+                             parameter_overrides=[Parameter('start_type_description_service',
+                                                            value=False)])
+    node.create_subscription(JointState, '/drive_bridge/joint_commands', lambda data: None,
+                             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
+                             raw=True)
+    executor = EventsExecutor()
+    executor.add_node(node)
+    print('receiver ready', flush=True)
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.5)
+    except (ExternalShutdownException, KeyboardInterrupt):
+        pass  # stopped by the bench (SIGINT/SIGTERM)
+
+
+def run_floor(window_s: float) -> Dict:
+    """Measure the floor: a bare receiver process of the client's 100 Hz commands."""
+    receiver = subprocess.Popen([sys.executable, __file__, '--receiver'],
+                                stdout=subprocess.PIPE, text=True)
+    helper = None
+    try:
+        assert receiver.stdout.readline().strip() == 'receiver ready'
+        helper = subprocess.Popen(
+            [sys.executable, __file__, '--client', 'commands', str(WARM_UP_S + window_s + 5.0)],
+            stdout=subprocess.PIPE, text=True)
+        assert helper.stdout.readline().strip() == 'client ready'
+        wait_for(lambda: False, WARM_UP_S)
+        before = thread_cpu.sample(receiver.pid)
+        started_s = time.monotonic()
+        time.sleep(window_s)
+        after = thread_cpu.sample(receiver.pid)
+        ended_s = time.monotonic()
+        rates = json.loads(helper.stdout.readline())
+    finally:
+        for child in (helper, receiver):
+            if child is not None:
+                child.terminate()
+                child.wait()
+                child.stdout.close()
+    rows = thread_cpu.shares(before, after, ended_s - started_s, {})
+    shares = thread_cpu.by_name(rows)
+    return {'cpu': thread_cpu.total_pct(rows), 'commands': rates['commands'],
+            'dds': sum(value for name, value in shares.items() if name.startswith('dds')),
+            'python': sum(value for name, value in shares.items()
+                          if not name.startswith('dds'))}
+
+
+def run_case(baudrate: int, window_s: float, joints: bool, client: Optional[str],
+             source: str) -> Dict:
     """Measure one case; return its figures."""
     blocks = devices(joints)
     line = PacedSimulator(simulator_devices(blocks), LineTiming(baudrate, 'E', 1))
-    node = NodeProcess(node_bus(line.path, baudrate), blocks,
-                       main=('-c', NODE_MAIN.format(batch=batch)))
+    node = NodeProcess(node_bus(line.path, baudrate), blocks, source=source)
     helper = None
     try:
         wait_until_ready(list(blocks))
@@ -131,10 +203,11 @@ def run_case(label: str, baudrate: int, window_s: float, joints: bool, client: O
                 env=dict(os.environ))
             assert helper.stdout.readline().strip() == 'client ready'
         wait_for(lambda: False, WARM_UP_S)
+        names = thread_cpu.python_thread_names(node.pid)
         started_s = time.monotonic()
-        before = cpu_ticks(f'/proc/{node.process.pid}/stat')
+        before = thread_cpu.sample(node.pid)
         time.sleep(window_s)
-        after = cpu_ticks(f'/proc/{node.process.pid}/stat')
+        after = thread_cpu.sample(node.pid)
         ended_s = time.monotonic()
         wire = line.wire_figures(started_s, ended_s)
         rates = {}
@@ -147,47 +220,84 @@ def run_case(label: str, baudrate: int, window_s: float, joints: bool, client: O
             helper.stdout.close()
         node.stop()
         line.close()
-    seconds = ended_s - started_s
-    return {'label': label, 'cpu': 100.0 * (after - before) / TICKS_PER_S / seconds,
+    rows = thread_cpu.shares(before, after, ended_s - started_s, names)
+    shares = thread_cpu.by_name(rows)
+    figures = {'cpu': thread_cpu.total_pct(rows), 'wire': wire['rate'],
+               'states': rates.get('states', 0.0), 'commands': rates.get('commands', 0.0),
+               'dds': sum(value for name, value in shares.items() if name.startswith('dds'))}
+    figures.update({name: shares.get(name, 0.0) for name in THREADS})
+    return figures
 
-            'wire': wire['rate'], 'states': rates.get('states', 0.0),
-            'commands': rates.get('commands', 0.0)}
+
+def cell(values: List[float]) -> str:
+    """Return the median [lowest, highest] of ``values``."""
+    values = sorted(values)
+    if len(values) == 1:
+        return f'{values[0]:.1f}'
+    return f'{statistics.median(values):.1f} [{values[0]:.1f}, {values[-1]:.1f}]'
 
 
-CASES = (('not joints', False, None, False), ('states only', True, 'listen', False),
-         ('commands, per joint', True, 'commands', False),
-         ('commands, batched', True, 'commands', True))
+def print_table(results: Dict[str, Dict[str, List[Dict]]]) -> None:
+    """Print one row per version and case, and what the commands added."""
+    print('| version | case | node CPU, % of one core | bus thread | executor | commands '
+          'thread | Fast DDS | bus tx/s | joint_states/s received | commands/s sent |')
+    print('| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |')
+    for label, cases in results.items():
+        for case, rows in cases.items():
+            cells = [cell([row[key] for row in rows]) for key in
+                     ('cpu', *THREADS, 'dds', 'wire', 'states', 'commands')]
+            print(f'| {label or "this"} | {case} | ' + ' | '.join(cells) + ' |')
+    for label, cases in results.items():
+        added = [with_commands['cpu'] - states['cpu'] for with_commands, states in
+                 zip(cases['commands'], cases['states only'])]
+        print(f'{label or "this"}: 100 Hz commands add {cell(added)} % of one core '
+              '(commands - states only, same round)')
 
 
 def main() -> None:
-    if len(sys.argv) > 1 and sys.argv[1] == '--client':
-        client_main(sys.argv[2], float(sys.argv[3]))
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('window_s', nargs='?', type=float, default=10.0)
+    parser.add_argument('baudrate', nargs='?', type=int, default=38400)
+    parser.add_argument('runs', nargs='?', type=int, default=3)
+    parser.add_argument('--compare', action='append', default=[], metavar='LABEL=DIR')
+    parser.add_argument('--floor', action='store_true',
+                        help='also measure a bare receiver of the commands (the floor)')
+    parser.add_argument('--client', nargs=2, help=argparse.SUPPRESS)
+    parser.add_argument('--receiver', action='store_true', help=argparse.SUPPRESS)
+    arguments = parser.parse_args()
+    if arguments.client:
+        client_main(arguments.client[0], float(arguments.client[1]))
         return
-    window_s = float(sys.argv[1]) if len(sys.argv) > 1 else 10.0
-    baudrate = int(sys.argv[2]) if len(sys.argv) > 2 else 38400
-    repeats = int(sys.argv[3]) if len(sys.argv) > 3 else 3
+    if arguments.receiver:
+        receiver_main()
+        return
+    print(thread_cpu.machine())
+    print(f'drive_bridge_node, {JOINTS} FC 51 running, poll_rate 100 (as fast as the line '
+          f'allows), {arguments.baudrate} baud 8E1 timing through the wire pacer, '
+          f'{arguments.window_s:g} s windows, {arguments.runs} runs a case: median [lowest, '
+          f'highest]; {conditions()}')
     rclpy.init()
-    results: Dict[str, List[Dict]] = {label: [] for label, *_ in CASES}
+    compared = versions(arguments.compare)
+    results = {label: {case: [] for case, *_ in CASES} for label, _ in compared}
+    floors: List[Dict] = []
     try:
-        for _ in range(repeats):  # the cases in turn, so that a noisy minute hits them all
-            for label, joints, client, batch in CASES:
-                results[label].append(run_case(label, baudrate, window_s, joints, client,
-                                               batch))
+        for _ in range(arguments.runs):  # in turn, so that a noisy minute hits them all
+            for label, source in compared:
+                for case, joints, client in CASES:
+                    results[label][case].append(run_case(
+                        arguments.baudrate, arguments.window_s, joints, client, source))
+            if arguments.floor:
+                floors.append(run_floor(arguments.window_s))
     finally:
         rclpy.try_shutdown()
-    print(f'drive_bridge_node, {JOINTS} FC 51 running, poll_rate 100 (as fast as the line '
-          f'allows), {baudrate} baud 8E1 timing through the wire pacer, {window_s:.0f} s '
-          f'windows, {repeats} runs a case: median [lowest, highest]')
-    print('| case | node CPU, % of one core | bus tx/s | joint_states msgs/s received | '
-          'commands/s sent |')
-    print('| --- | --- | --- | --- | --- |')
-    for label, rows in results.items():
-        cells = []
-        for key in ('cpu', 'wire', 'states', 'commands'):
-            values = sorted(row[key] for row in rows)
-            cells.append(f'{statistics.median(values):.1f} [{values[0]:.1f}, '
-                         f'{values[-1]:.1f}]' if len(values) > 1 else f'{values[0]:.1f}')
-        print(f'| {label} | ' + ' | '.join(cells) + ' |')
+    print_table(results)
+    if floors:
+        print(f'floor: a bare rclpy process taking the same commands (EventsExecutor, '
+              f'serialized, empty callback): {cell([f["cpu"] for f in floors])} % of one core '
+              f'(Python thread {cell([f["python"] for f in floors])}, Fast DDS '
+              f'{cell([f["dds"] for f in floors])}) at '
+              f'{cell([f["commands"] for f in floors])} commands/s')
+    print(thread_cpu.load())
 
 
 if __name__ == '__main__':

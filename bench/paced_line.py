@@ -13,7 +13,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import Dict, List, Sequence
+from typing import Dict, List, Sequence, Tuple
 
 from drive_bridge.config import write_params_file
 from drive_bridge.sim.wire_pacer import LineTiming, transactions, wire_fraction, WirePacer
@@ -87,14 +87,25 @@ class NodeProcess:
     """``drive_bridge_node`` in a subprocess with a params file for ``bus`` and ``devices``."""
 
     def __init__(self, bus: Dict, devices: Dict[str, Dict],
-                 main: Sequence[str] = ('-m', 'drive_bridge.ros.entry')):
-        """Start the node; ``main``: the interpreter arguments that run it."""
+                 main: Sequence[str] = ('-m', 'drive_bridge.ros.entry'), source: str = ''):
+        """
+        Start the node; ``main``: the interpreter arguments that run it.
+
+        ``source``: a directory holding another ``drive_bridge`` package (a checkout or an
+        export of another commit) for the node to run instead of the installed one, to
+        compare two versions on one machine (``--compare`` of the CPU benches).
+        """
         self.directory = tempfile.TemporaryDirectory(prefix='drive_bridge_bench_')
         params = write_params_file(os.path.join(self.directory.name, 'bus.yaml'), bus, devices)
         self.log = open(os.path.join(self.directory.name, 'node.log'), 'w+')
+        environment = dict(os.environ)
+        if source:  # first on the path: the directory it runs in, and PYTHONPATH
+            source = os.path.abspath(source)
+            environment['PYTHONPATH'] = os.pathsep.join(
+                filter(None, [source, environment.get('PYTHONPATH', '')]))
         self.process = subprocess.Popen(
             [sys.executable, *main, '--ros-args', '--params-file', params],
-            env=dict(os.environ), stdout=self.log, stderr=self.log, text=True)
+            env=environment, cwd=source or None, stdout=self.log, stderr=self.log, text=True)
 
     @property
     def pid(self) -> int:
@@ -137,6 +148,31 @@ def simulator_devices(devices: Dict[str, Dict]) -> List[str]:
 def node_bus(path: str, baudrate: int) -> Dict:
     """Return the node's bus settings on the pacer's pty: parity N, 8N2 (11 bits as 8E1)."""
     return {'port': path, 'baudrate': baudrate, 'parity': 'N', 'timeout': 0.5}
+
+
+def versions(compare: Sequence[str]) -> List[Tuple[str, str]]:
+    """
+    Return (label, source) of each version to run: the installed package, or ``--compare``'s.
+
+    ``compare`` holds ``LABEL=DIRECTORY`` items (a directory with a ``drive_bridge``
+    package, e.g. ``git archive <commit> drive_bridge | tar -x -C DIRECTORY``); ``LABEL=``
+    alone is the installed package.
+    """
+    if not compare:
+        return [('', '')]
+    pairs = []
+    for item in compare:
+        label, _, source = item.partition('=')
+        if source and not os.path.isdir(os.path.join(source, 'drive_bridge')):
+            raise SystemExit(f'--compare {item}: no drive_bridge package in {source}')
+        pairs.append((label, source))
+    return pairs
+
+
+def conditions() -> str:
+    """Return what of the environment changes the node's CPU (message field checks)."""
+    checks = os.environ.get('ROS_PYTHON_CHECK_FIELDS', '') not in ('', '0')
+    return f'ROS_PYTHON_CHECK_FIELDS {"on" if checks else "off"}'
 
 
 def wait_for(predicate, timeout_s: float, interval_s: float = 0.05) -> bool:

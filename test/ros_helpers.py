@@ -27,17 +27,20 @@ def write_params(path, bus: Dict, devices: Dict[str, Dict]) -> str:
 
 
 def start_node(params_file: str, namespace: str = '',
-               restore_signals: bool = False) -> subprocess.Popen:
+               restore_signals: bool = False, remaps: Sequence[str] = ()) -> subprocess.Popen:
     """
     Start drive_bridge_node in a subprocess with the test environment.
 
     ``restore_signals``: SIGINT and SIGTERM at their defaults in the child (a child of a
-    non-interactive shell's background job inherits SIGINT ignored).
+    non-interactive shell's background job inherits SIGINT ignored). ``remaps``: more
+    ``-r FROM:=TO`` rules.
     """
     command = [sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args',
                '--params-file', params_file]
     if namespace:
         command += ['-r', f'__ns:={namespace}']
+    for rule in remaps:
+        command += ['-r', rule]
     log = tempfile.NamedTemporaryFile('w+', prefix='drive_bridge_node_', suffix='.log')
     process = subprocess.Popen(command, env=dict(os.environ), stdout=log, stderr=log,
                                text=True,
@@ -83,9 +86,10 @@ def serving(server) -> Iterator[object]:
 
 @contextmanager
 def running_node(params_path, bus: Dict, devices: Dict[str, Dict], drives: Sequence[str] = (),
-                 ready: Sequence[str] = (), namespace: str = '') -> Iterator['RosClient']:
+                 ready: Sequence[str] = (), namespace: str = '',
+                 remaps: Sequence[str] = ()) -> Iterator['RosClient']:
     """Run the node on ``bus`` with ``devices``; yield a client once ``ready`` are ready."""
-    process = start_node(write_params(params_path, bus, devices), namespace)
+    process = start_node(write_params(params_path, bus, devices), namespace, remaps=remaps)
     client = RosClient(list(devices), namespace=namespace, drives=list(drives))
     try:
         for name in ready:

@@ -3,15 +3,32 @@ Where the node's high-rate command subscriptions are made, and nowhere else.
 
 ``~/joint_commands`` (ros2_control at controller rates) and each ``<name>/speed_reference``
 can arrive at 100 Hz or more; their callbacks only hand a value to the bus (they never wait
-for it). Every one of them is created and destroyed through :class:`CommandInputs`, so
-they can be moved together onto a node or executor of their own (issue 29) without
-touching the device interfaces or the joints. Such a node would have to keep the topic
-names as they resolve now: ``~/joint_commands`` is private to the ``drive_bridge`` node.
+for it). They live on a node of their own, ``<node name>_commands`` in the node's
+namespace, which has nothing else (no parameter services, no type description service, no
+``/rosout``), spun by an executor of its own on its own thread
+(:mod:`drive_bridge.ros.commands_thread`): a message then costs the same whatever the
+number of devices, services and timers of the ``drive_bridge`` node, and a slow service or
+``/diagnostics`` on the node's executor never holds a command back.
+
+The topic names are resolved by the ``drive_bridge`` node (its name, namespace and ``-r``
+remappings), so they are exactly what they were on the node itself: ``~/joint_commands`` is
+``/drive_bridge/joint_commands`` (``/line1/drive_bridge/joint_commands`` in ``/line1``),
+and a remapping of either topic applies. The commands node takes no process-wide arguments
+(a ``-r __node:=...`` renames the ``drive_bridge`` node only, and the commands node after
+it), and has no parameters of its own. Its callbacks log through the ``drive_bridge``
+node's logger.
+
+The node makes the subscriptions at configure (through :meth:`CommandInputs.speed_reference`
+and :meth:`CommandInputs.joint_commands`), :meth:`CommandInputs.start` spins them, and
+:meth:`CommandInputs.stop` ends the thread and waits for it before the node closes the bus,
+so no command callback runs once the bus begins to close.
 """
 
-from typing import Callable
+from typing import Callable, Optional
 
+from drive_bridge.ros.commands_thread import CommandsThread
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
@@ -21,25 +38,66 @@ JOINT_COMMANDS_TOPIC = '~/joint_commands'
 # Reliable, as JointStateTopicSystem and ros2 topic pub publish them.
 JOINT_COMMANDS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 SPEED_REFERENCE_DEPTH = 10
+COMMANDS_NODE_SUFFIX = '_commands'
+
+
+def commands_node(node: Node) -> Node:
+    """Return the lean node of ``node``'s command subscriptions (nothing else on it)."""
+    return Node(node.get_name() + COMMANDS_NODE_SUFFIX, namespace=node.get_namespace(),
+                context=node.context, use_global_arguments=False, enable_rosout=False,
+                start_parameter_services=False,
+                parameter_overrides=[Parameter('start_type_description_service',
+                                               value=False)])
 
 
 class CommandInputs:
-    """Makes and destroys the high-rate command subscriptions (executor thread)."""
+    """Makes, spins and destroys the high-rate command subscriptions of one node."""
 
     def __init__(self, node: Node):
+        """Make the commands node of ``node`` (the ``drive_bridge`` node), not spun yet."""
         self._node = node
+        self.node = commands_node(node)
+        self._thread: Optional[CommandsThread] = None
 
     def speed_reference(self, device: str,
                         callback: Callable[[Float32], None]) -> Subscription:
         """Subscribe ``<device>/speed_reference`` (percent of the drive's reference)."""
-        return self._node.create_subscription(Float32, f'{device}/speed_reference', callback,
-                                              SPEED_REFERENCE_DEPTH)
+        return self._subscribe(Float32, f'{device}/speed_reference', callback,
+                               SPEED_REFERENCE_DEPTH)
 
-    def joint_commands(self, callback: Callable[[JointState], None]) -> Subscription:
-        """Subscribe ``~/joint_commands`` (ros2_control velocities, rad/s)."""
-        return self._node.create_subscription(JointState, JOINT_COMMANDS_TOPIC, callback,
-                                              JOINT_COMMANDS_QOS)
+    def joint_commands(self, callback: Callable[[bytes], None]) -> Subscription:
+        """
+        Subscribe ``~/joint_commands`` (ros2_control velocities, rad/s), serialized.
+
+        ``callback`` gets each message as its CDR bytes (:mod:`drive_bridge.ros.joints.wire`
+        reads them): rclpy does not build the message's Python objects.
+        """
+        return self._subscribe(JointState, JOINT_COMMANDS_TOPIC, callback, JOINT_COMMANDS_QOS,
+                               raw=True)
 
     def destroy(self, subscription: Subscription) -> None:
-        """Destroy a subscription made here."""
-        self._node.destroy_subscription(subscription)
+        """Destroy a subscription made here (the thread is stopped: see :meth:`stop`)."""
+        self.node.destroy_subscription(subscription)
+
+    def start(self) -> None:
+        """Spin the subscriptions made so far on the commands thread."""
+        if self._thread is None:
+            self._thread = CommandsThread(self.node)
+
+    def stop(self) -> bool:
+        """End the commands thread and wait for it; return whether it ended (idempotent)."""
+        thread = self._thread
+        if thread is None or not thread.stop():
+            return thread is None
+        self._thread = None
+        return True
+
+    def destroy_node(self) -> None:
+        """Stop the thread and destroy the commands node."""
+        self.stop()
+        self.node.destroy_node()
+
+    def _subscribe(self, kind, topic: str, callback, qos, raw: bool = False) -> Subscription:
+        """Subscribe ``topic`` as the ``drive_bridge`` node resolves it, on the commands node."""
+        name = self._node.resolve_topic_name(topic)
+        return self.node.create_subscription(kind, name, callback, qos, raw=raw)

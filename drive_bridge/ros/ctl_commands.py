@@ -60,11 +60,12 @@ def reference(session: BridgeSession, device: str, percent: float,
     publisher = session.node.create_publisher(Float32, topic, 10)
 
     def listed() -> bool:
-        return _by_bridge(session, session.node.get_subscriptions_info_by_topic(topic))
+        return _by_bridge(session, session.node.get_subscriptions_info_by_topic(topic),
+                          session.commands_name)
 
     def connected() -> bool:
         readers = session.node.get_subscriptions_info_by_topic(topic)
-        return _by_bridge(session, readers) and \
+        return _by_bridge(session, readers, session.commands_name) and \
             publisher.get_subscription_count() >= len(readers)
     if not session.wait_for(connected, listed):
         drives = session.relative(list(session.subscriptions()), '/speed_reference')
@@ -111,10 +112,10 @@ def state(session: BridgeSession, device: str) -> int:
     return 0
 
 
-def _by_bridge(session: BridgeSession, endpoints) -> bool:
-    """Return whether one of the topic ``endpoints`` belongs to the bridge node."""
-    return any(info.node_name == session.name and info.node_namespace == session.namespace
-               for info in endpoints)
+def _by_bridge(session: BridgeSession, endpoints, name: str = '') -> bool:
+    """Return whether one of the topic ``endpoints`` belongs to the bridge node (or ``name``)."""
+    return any(info.node_name == (name or session.name) and
+               info.node_namespace == session.namespace for info in endpoints)
 
 
 def echo(session: BridgeSession, topic_name: str, count: Optional[int]) -> int:

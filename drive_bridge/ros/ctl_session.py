@@ -13,6 +13,7 @@ import threading
 import time
 from typing import Callable, Dict, List
 
+from drive_bridge.ros.command_inputs import COMMANDS_NODE_SUFFIX
 from drive_bridge.ros.ctl_values import BadInput, BRIDGE_NODE, Refused
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node, NodeNameNonExistentError
@@ -102,12 +103,18 @@ class BridgeSession:
         return self._query(self.node.get_publisher_names_and_types_by_node)
 
     def subscriptions(self) -> Dict[str, List[str]]:
-        """Return topic -> types the bridge node subscribes to."""
-        return self._query(self.node.get_subscriber_names_and_types_by_node)
+        """Return topic -> types the bridge's commands node subscribes to (speed references)."""
+        return self._query(self.node.get_subscriber_names_and_types_by_node,
+                           self.commands_name)
 
-    def _query(self, query) -> Dict[str, List[str]]:
+    @property
+    def commands_name(self) -> str:
+        """Return the name of the bridge's commands node (its command subscriptions)."""
+        return self.name + COMMANDS_NODE_SUFFIX
+
+    def _query(self, query, name: str = '') -> Dict[str, List[str]]:
         try:
-            return dict(query(self.name, self.namespace))
+            return dict(query(name or self.name, self.namespace))
         except NodeNameNonExistentError:
             return {}
 

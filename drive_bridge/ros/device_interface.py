@@ -11,6 +11,7 @@ nothing but stops, and a closed bus nothing at all.
 
 from dataclasses import dataclass
 import functools
+import time
 
 from drive_bridge import config as cfg
 from drive_bridge.bus.events import BusEvent
@@ -22,6 +23,7 @@ from drive_bridge.ros.command_inputs import CommandInputs
 from drive_bridge.ros.gate import CommandGate
 from drive_bridge.ros.publishers import DevicePublishers
 from drive_bridge.ros.service_calls import ServiceCalls
+from drive_bridge.ros.throttle import Throttle
 from rclpy.lifecycle import LifecycleNode
 from std_msgs.msg import Float32
 from std_srvs.srv import Trigger
@@ -48,6 +50,7 @@ class DeviceInterface:
         self._node = node
         self._logger = node.get_logger()
         self._paths = paths
+        self._warn = Throttle(lambda text: self._logger.warning(text), time.monotonic)
         self.publishers = DevicePublishers(node, self.name, snapshot.reading_fields)
         self.publishers.publish_state('unknown')
         self._speed_reference = None
@@ -104,17 +107,18 @@ class DeviceInterface:
         return await self._paths.calls.answer_of(future, command.value, self._paths.give_up_s)
 
     def _on_speed_reference(self, message: Float32) -> None:
+        """Hand the reference to the bus (the commands thread); a refusal is logged throttled."""
         gate = self._paths.gate
         bus = gate.bus
         if not gate.active or bus is None:
-            self._logger.warning(f'{self.name}/speed_reference: {gate.inactive_reason()}',
-                                 throttle_duration_sec=1.0)
+            self._warn('inactive', lambda: f'{self.name}/speed_reference: '
+                       f'{gate.inactive_reason()}')
             return
         try:
             bus.set_speed_reference(self.name, message.data, from_topic=True)
         except CommandRefused as error:
-            self._logger.warning(f'{self.name}/speed_reference: {error}',
-                                 throttle_duration_sec=1.0)
+            reason = str(error)
+            self._warn('refused', lambda: f'{self.name}/speed_reference: {reason}')
         except Exception as error:  # noqa: B902 - a bug must not kill the node
             self._logger.error(f'{self.name}/speed_reference: internal error '
                                f'{type(error).__name__}: {error}')

@@ -2,9 +2,11 @@
 Whether the node takes commands now, and on which bus: what every command path asks first.
 
 The lifecycle sets it (executor thread; the main thread on an exit signal); the Trigger
-services, ``speed_reference``, the joints and the diagnostics read it. A closed bus is None
-from the moment the node begins to close it, so nothing is submitted to a bus that is
-stopping its motors and shutting down.
+services and the diagnostics (executor thread), ``speed_reference`` and the joint commands
+(the commands thread of :mod:`drive_bridge.ros.command_inputs`) read it: each a plain
+attribute read, so a reader sees the value before or after a change, never a mix. A
+closed bus is None from the moment the node begins to close it, so nothing is submitted to
+a bus that is stopping its motors and shutting down.
 """
 
 from typing import Callable, Optional

@@ -66,8 +66,9 @@ class DriveBridgeNode(LifecycleNode):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
     def destroy_node(self) -> None:
-        """Stop taking the package's log records, then destroy the node."""
+        """Stop taking the package's log records, then destroy the commands node and this."""
         logs.detach(self._log_handler)
+        self._inputs.destroy_node()
         super().destroy_node()
 
     def configure_for_autostart(self) -> TransitionCallbackReturn:
@@ -137,6 +138,7 @@ class DriveBridgeNode(LifecycleNode):
         self._diagnostics_timer = self.create_timer(self.config.diagnostics_period_s,
                                                     self._on_diagnostics_timer)
         self._session.start()
+        self._inputs.start()
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -173,10 +175,16 @@ class DriveBridgeNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _close_bus(self) -> None:
-        """Close the bus: from the first line on, nothing is submitted to it."""
+        """
+        Close the bus: from the first line on, nothing is submitted to it.
+
+        The commands thread ends (and is waited for) before the bus does anything else, so
+        no command callback runs while the motors are stopped or after the bus is closed.
+        """
         self._gate.active = False
         session, self._session = self._session, None
         self._gate.bus = None
+        self._inputs.stop()
         if session is not None:
             session.close()
         if self._diagnostics_timer is not None:

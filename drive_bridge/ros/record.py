@@ -26,6 +26,7 @@ from typing import Dict, List, Optional, Tuple, TYPE_CHECKING
 from drive_bridge.bag_metadata import encode_references, REFERENCE_AT_START
 from drive_bridge.errors import RecordingError
 from drive_bridge.extras import MissingDependency, require
+from drive_bridge.ros.command_inputs import COMMANDS_NODE_SUFFIX
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameters
 import rclpy
@@ -97,16 +98,25 @@ def full_topic_name(topic: str, namespace: str) -> str:
 
 
 def bridge_topics(node: Node, namespace: str) -> Dict[str, str]:
-    """Return topic -> type of the drive_bridge node in ``namespace`` ({} if not found)."""
+    """
+    Return topic -> type of the drive_bridge node in ``namespace`` ({} if not found).
+
+    Its command subscriptions (``speed_reference``, ``~/joint_commands``) are those of its
+    commands node, ``drive_bridge_commands`` beside it (:mod:`drive_bridge.ros.command_inputs`).
+    """
     topics: Dict[str, str] = {}
-    for query in (node.get_publisher_names_and_types_by_node,
-                  node.get_subscriber_names_and_types_by_node):
+    commands_node = BRIDGE_NODE + COMMANDS_NODE_SUFFIX
+    for query, name in ((node.get_publisher_names_and_types_by_node, BRIDGE_NODE),
+                        (node.get_subscriber_names_and_types_by_node, BRIDGE_NODE),
+                        (node.get_subscriber_names_and_types_by_node, commands_node)):
         try:
-            found = query(BRIDGE_NODE, namespace)
+            found = query(name, namespace)
         except NodeNameNonExistentError:
+            if name == commands_node:
+                continue  # not made yet (the node not configured)
             return {}
-        topics.update((name, types[0]) for name, types in found
-                      if name not in SKIPPED and types)
+        topics.update((topic, types[0]) for topic, types in found
+                      if topic not in SKIPPED and types)
     return topics
 
 

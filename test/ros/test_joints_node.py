@@ -15,7 +15,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from drive_bridge.sim.devices import make_device, make_sim_server
 import pytest
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
-from ros_helpers import running_node, serving
+from rclpy.serialization import serialize_message
+from ros_helpers import node_output, running_node, serving
 from sensor_msgs.msg import JointState
 
 SCALE = 20.0  # rad/s at 100 %: 10 rad/s = 50 % = 0x2000
@@ -415,6 +416,45 @@ def test_bad_commands_are_refused_and_nothing_is_sent(node, joints, wheels):
     joints.spin_for(0.3)
     assert left.reference_word == 0x0666 and right.reference_word == 0xF99A  # unchanged
     _publish_once(joints, ['left_wheel_joint'], [3.0])  # and a good one is taken
+    assert joints.spin_until(lambda: left.reference_word == 0x0999)
+
+
+def _malformed_commands():
+    """Return serialized JointStates that are not whole (cut short, a huge length, ...)."""
+    good = serialize_message(JointState(name=list(WHEELS), velocity=[5.0, 5.0]))
+    name_at = good.index(WHEELS[0].encode())
+    return {'cut in the velocities': good[:-12],
+            'frame_id 4 GB long': good[:12] + b'\xff\xff\xff\xff' + good[16:],
+            'a name that is not UTF-8': good[:name_at] + b'\xff' + good[name_at + 1:],
+            'another encapsulation, garbage': b'\x00\x07\x00\x00' + b'\x5a' * 20}
+
+
+def test_malformed_bytes_say_why_in_one_line_send_nothing_and_the_node_lives(
+        node, joints, wheels):
+    left, right = wheels
+    for device in DEVICES:  # a stop: the stop image is kept alive with the reference in force
+        assert node.call(device, 'stop').success
+    joints.command(left_wheel_joint=2.0, right_wheel_joint=2.0)
+    assert joints.spin_until(
+        lambda: left.reference_word == 0x0666 and right.reference_word == 0xF99A)
+    joints.sending = False
+    joints.spin_for(1.1)  # the log throttle's period: the first malformed message is logged
+    assert node.wait_fresh_diagnostics()
+    before = int(command_counters(node)['messages_malformed'])
+    control = (left.control_word, right.control_word)
+    malformed = _malformed_commands()
+    for data in malformed.values():
+        joints.publisher.publish(data)  # bytes: published as they are
+    assert node.spin_until(lambda: int(command_counters(node).get('messages_malformed', 0))
+                           == before + len(malformed))
+    joints.spin_for(0.3)
+    assert left.reference_word == 0x0666 and right.reference_word == 0xF99A  # unchanged
+    assert (left.control_word, right.control_word) == control
+    output = node_output(node.process)
+    reasons = [line for line in output.splitlines() if 'not a JointState' in line]
+    assert reasons and all('ignored, nothing sent' in line for line in reasons), output[-2000:]
+    assert 'Traceback' not in output
+    _publish_once(joints, ['left_wheel_joint'], [3.0])  # the node lives and takes a good one
     assert joints.spin_until(lambda: left.reference_word == 0x0999)
 
 

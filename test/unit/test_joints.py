@@ -236,7 +236,7 @@ class Logger:
 class Bench:
     """A bus with two wheel drives, the bridge, and what it published."""
 
-    def __init__(self, batch=False, **left):
+    def __init__(self, **left):
         self.clock = FakeClock()
         self.line = FakeFc51(self.clock)
         built = build(left={**DRIVE, 'poll_rate': 10.0, 'velocity_scale': 20.0,
@@ -253,8 +253,7 @@ class Bench:
         self.logger = Logger()
         self.bridge = joints.JointBridge(self.bus, joints.joint_specs(built.devices),
                                          self.sent.append, self.logger, lambda: self.active,
-                                         stamp_offset_ns=1_000_000_000_000, clock=self.clock,
-                                         batch=batch)
+                                         stamp_offset_ns=1_000_000_000_000, clock=self.clock)
 
     def _on_event(self, event):
         self.events.append(event)
@@ -354,6 +353,24 @@ def test_bad_commands_are_counted_and_nothing_is_taken():
     assert any("unknown joint 'caster'" in text for text in warnings)
 
 
+def test_serialized_commands_are_taken_as_the_messages_they_carry():
+    serialize = pytest.importorskip('rclpy.serialization').serialize_message
+    bench = Bench()
+    bench.run(0.3)
+    bench.bridge.on_serialized_commands(serialize(JointState(
+        name=['left_wheel', 'right_wheel'], velocity=[10.0, 4.0], position=[1.0, 2.0])))
+    assert bench.reference_word('left') == 0x2000
+    assert bench.reference_word('right') == (-3276) & 0xFFFF
+    data = serialize(JointState(name=['left_wheel'], velocity=[2.0]))
+    bench.bridge.on_serialized_commands(data[:-6])  # cut short: nothing taken
+    bench.bridge.on_serialized_commands(b'\x00\x01\x00')
+    assert bench.reference_word('left') == 0x2000
+    assert bench.bridge.counters == {'messages': 3, 'unknown_names': 0,
+                                     'without_velocity': 0, 'malformed': 2}
+    status = bench.bridge.commands_status('drive_bridge: ~/joint_commands')
+    assert 'not a JointState' in status.message and 'nothing sent' in status.message
+
+
 def test_warnings_are_logged_at_most_once_a_second_per_kind():
     bench = Bench()
     bench.run(0.3)
@@ -429,14 +446,6 @@ def test_runtime_command_mode_changes():
     bench.command(left_wheel=0.0)
     bench.run(1.0)
     assert bench.bus.snapshot('left').holds_run  # reference mode: zero is just a reference
-
-
-def test_batched_states_one_message_per_round():
-    bench = Bench(batch=True)
-    bench.line.actual[1] = 0x2000
-    bench.run(1.0)
-    assert all(sorted(m.name) == ['left_wheel', 'right_wheel'] for m in bench.sent)
-    assert 8 <= len(bench.sent) <= 11
 
 
 def test_stamp_offset_moves_the_bus_clock_onto_the_node_clock():

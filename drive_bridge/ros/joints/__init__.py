@@ -14,12 +14,13 @@ node's clock by one offset measured at configure. A drive that is offline, unkno
 or not yet read is left out. After an outage the position is held and integration starts
 again from the next reading: what the motor did meanwhile is unknown.
 
-Commands (executor thread): each velocity of a known joint becomes the speed reference
-(rad/s -> % by ``velocity_scale``) through :meth:`BusMaster.set_speed_reference` with
-``from_topic``, so the rules, the counters and the deadman are those of ``speed_reference``;
-the bus writes the latest reference with its next poll, so commands cost no bus traffic of
-their own. Unknown names, messages without velocities and messages whose velocities do not
-match their names are counted and logged at most once a second per kind.
+Commands (the commands thread of :mod:`drive_bridge.ros.command_inputs`): each velocity of
+a known joint becomes the speed reference (rad/s -> % by ``velocity_scale``) through
+:meth:`BusMaster.set_speed_reference` with ``from_topic``, so the rules, the counters and
+the deadman are those of ``speed_reference``; the bus writes the latest reference with its
+next poll, so commands cost no bus traffic of their own. Unknown names, messages without
+velocities and messages whose velocities do not match their names are counted and logged at
+most once a second per kind.
 
 ``command_mode: auto_start`` (:mod:`drive_bridge.ros.joints.auto_start`): a nonzero
 command starts a stopped, untripped drive; a zero command held ``auto_stop_delay`` seconds
@@ -30,7 +31,7 @@ zero (and back). A trip is never reset automatically.
 
 The parts (one module each), composed by :class:`JointBridge` around one
 :class:`~drive_bridge.ros.joints.model.JointTable`: ``states`` (bus thread), ``commands``
-(executor thread), ``auto_start`` (the decisions, no I/O) and ``starter`` (carrying them
+(commands thread), ``auto_start`` (the decisions, no I/O) and ``starter`` (carrying them
 out on the bus), ``settings`` (runtime changes), ``values`` (what /diagnostics shows), and
 ``interface`` (the publisher and the subscription, made through
 :class:`drive_bridge.ros.command_inputs.CommandInputs`).

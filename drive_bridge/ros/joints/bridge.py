@@ -29,13 +29,13 @@ class JointBridge:
     def __init__(self, bus: BusMaster, specs: Sequence[JointSpec],
                  publish: Callable[[JointState], None], logger,
                  is_active: Callable[[], bool], stamp_offset_ns: int,
-                 clock: Callable[[], float] = time.monotonic, batch: bool = False):
+                 clock: Callable[[], float] = time.monotonic):
         self.bus = bus
         table = JointTable(specs)
         self.joints: Dict[str, Joint] = table.by_device
         self.by_name: Dict[str, Joint] = table.by_name
         starter = AutoStarter(bus, table, logger, clock)
-        self.states = JointStates(table, starter, publish, is_active, stamp_offset_ns, batch)
+        self.states = JointStates(table, starter, publish, is_active, stamp_offset_ns)
         self.commands = JointCommands(bus, table, starter, logger, is_active, clock)
         self.settings = JointSettings(bus, table, logger)
         self.values = JointValues(table, self.commands.counts, clock)
@@ -47,8 +47,12 @@ class JointBridge:
         self.states.on_bus_event(event)
 
     def on_commands(self, message: JointState) -> None:
-        """Take a JointState command (executor thread); see JointCommands."""
+        """Take a JointState command (commands thread); see JointCommands."""
         self.commands.on_commands(message)
+
+    def on_serialized_commands(self, data: bytes) -> None:
+        """Take a serialized JointState command (commands thread); see JointCommands."""
+        self.commands.on_serialized(data)
 
     def check_settings(self, changes: SettingChanges) -> None:
         """Raise ConfigError for a runtime change the joints cannot take (nothing applied)."""

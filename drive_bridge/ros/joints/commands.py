@@ -1,5 +1,5 @@
 """
-The joint commands (executor thread): each velocity of a known joint becomes its reference.
+The joint commands (commands thread): each velocity of a known joint becomes its reference.
 
 rad/s -> % by ``velocity_scale``, through :meth:`BusMaster.set_speed_reference` with
 ``from_topic``, so the rules, the counters and the deadman are those of ``speed_reference``;
@@ -9,46 +9,53 @@ match their names are counted and logged at most once a second per kind.
 """
 
 from dataclasses import dataclass, field
-from typing import Callable, Dict
+import functools
+import threading
+from typing import Callable, Dict, Union
 
 from drive_bridge.bus.master import BusMaster
 from drive_bridge.errors import CommandRefused
 from drive_bridge.ros.command_inputs import JOINT_COMMANDS_TOPIC as COMMANDS_TOPIC
 from drive_bridge.ros.joints.model import Joint, JointTable
 from drive_bridge.ros.joints.starter import AutoStarter
+from drive_bridge.ros.joints.wire import JointCommand, MalformedCommand, read_joint_command
+from drive_bridge.ros.throttle import Throttle
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
-
-LOG_PERIOD_S = 1.0
-
-
-class Throttle:
-    """Log one line per kind at most once a period, saying how many were left out."""
-
-    def __init__(self, log: Callable[[str], None], clock: Callable[[], float]):
-        self._log = log
-        self._clock = clock
-        self._last: Dict[str, float] = {}
-        self._left_out: Dict[str, int] = {}
-
-    def __call__(self, kind: str, text: str) -> None:
-        now = self._clock()
-        if now - self._last.get(kind, -1e9) < LOG_PERIOD_S:
-            self._left_out[kind] = self._left_out.get(kind, 0) + 1
-            return
-        self._last[kind] = now
-        more = self._left_out.pop(kind, 0)
-        self._log(text + (f' ({more} more like it in the last {LOG_PERIOD_S:g} s)'
-                          if more else ''))
 
 
 @dataclass
 class CommandCounts:
-    """What ``~/joint_commands`` received and ignored, for /diagnostics."""
+    """
+    What ``~/joint_commands`` received and ignored, for /diagnostics.
+
+    The commands thread counts (:meth:`count`, :meth:`ignored`); /diagnostics reads a copy
+    on the executor thread (:meth:`copy`). The lock keeps a copy whole: a message and the
+    text of the last ignored one are never from two different moments.
+    """
 
     counters: Dict[str, int] = field(default_factory=lambda: {
         'messages': 0, 'unknown_names': 0, 'without_velocity': 0, 'malformed': 0})
     last_ignored: str = ''
     last_ignored_s: float = -1e9
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
+
+    def count(self, counter: str) -> None:
+        """Count one message of kind ``counter``."""
+        with self.lock:
+            self.counters[counter] += 1
+
+    def ignored(self, counter: str, text: str, now_s: float) -> None:
+        """Count one ignored message of kind ``counter``, with why in words."""
+        with self.lock:
+            self.counters[counter] += 1
+            self.last_ignored = text
+            self.last_ignored_s = now_s
+
+    def copy(self) -> 'CommandCounts':
+        """Return a copy taken at one moment (any thread)."""
+        with self.lock:
+            return CommandCounts(dict(self.counters), self.last_ignored, self.last_ignored_s)
 
 
 class JointCommands:
@@ -62,11 +69,23 @@ class JointCommands:
         self._is_active = is_active
         self._clock = clock
         self._warn = Throttle(lambda text: logger.warning(text), clock)
+        self._deserialize = functools.partial(deserialize_message, message_type=JointState)
         self.counts = CommandCounts()
 
-    def on_commands(self, message: JointState) -> None:
+    def on_serialized(self, data: bytes) -> None:
+        """Take a serialized JointState command (:mod:`drive_bridge.ros.joints.wire`)."""
+        try:
+            command = read_joint_command(data, self._deserialize)
+        except MalformedCommand as error:
+            self.counts.count('messages')
+            self._ignored('malformed', f'{COMMANDS_TOPIC}: not a JointState ({error}): '
+                          'ignored, nothing sent')
+            return
+        self.on_commands(command)
+
+    def on_commands(self, message: Union[JointState, JointCommand]) -> None:
         """Take a JointState command: velocities of known joints become speed references."""
-        self.counts.counters['messages'] += 1
+        self.counts.count('messages')
         if not self._is_active():
             self._warn('inactive', f'{COMMANDS_TOPIC}: node is not active (lifecycle): '
                        'activate it first; nothing sent')
@@ -88,9 +107,7 @@ class JointCommands:
             self._command(joint, velocity)
 
     def _ignored(self, counter: str, text: str) -> None:
-        self.counts.counters[counter] += 1
-        self.counts.last_ignored = text
-        self.counts.last_ignored_s = self._clock()
+        self.counts.ignored(counter, text, self._clock())
         self._warn(counter, text)
 
     def _command(self, joint: Joint, velocity: float) -> None:

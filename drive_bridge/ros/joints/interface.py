@@ -15,7 +15,6 @@ STATES_TOPIC = '~/joint_states'
 # States: reliable, so ros2 topic echo and bag recorders get every one; a best-effort
 # subscriber (JointStateTopicSystem's SensorDataQoS) matches it too.
 STATES_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-BATCH_STATES = False  # True: one message per round of every joint (bench/joint_cpu.py)
 
 
 def stamp_offset_ns(node, bus_clock: Callable[[], float]) -> int:
@@ -32,9 +31,8 @@ class JointInterface:
         self._inputs = inputs
         self.publisher = node.create_lifecycle_publisher(JointState, STATES_TOPIC, STATES_QOS)
         self.bridge = JointBridge(bus, specs, self.publisher.publish, node.get_logger(),
-                                  is_active, stamp_offset_ns(node, bus.clock),
-                                  batch=BATCH_STATES)
-        self.subscription = inputs.joint_commands(self.bridge.on_commands)
+                                  is_active, stamp_offset_ns(node, bus.clock))
+        self.subscription = inputs.joint_commands(self.bridge.on_serialized_commands)
 
     def destroy(self) -> None:
         """Destroy the publisher and the subscription."""

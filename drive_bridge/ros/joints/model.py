@@ -62,9 +62,9 @@ class JointTable:
     """
     The joints of one node by drive and by name, and the lock over their records.
 
-    The states (bus thread), the commands and settings (executor thread) and the automatic
-    starts' outcomes (the bus's future callbacks) change a record only while holding
-    ``lock``, and never call the bus while holding it.
+    The states (bus thread), the commands (commands thread), the settings (executor thread)
+    and the automatic starts' outcomes (the bus's future callbacks) change a record only
+    while holding ``lock``, and never call the bus while holding it.
     """
 
     def __init__(self, specs: Sequence[JointSpec]):

@@ -30,7 +30,7 @@ class AutoStarter:
         self._clock = clock
 
     def on_command(self, joint: Joint, nonzero: bool) -> None:
-        """Take an accepted joint command, zero or not (executor thread)."""
+        """Take an accepted joint command, zero or not (commands thread)."""
         facts = DriveFacts.of(self._bus.snapshot(joint.spec.device))
         with self._table.lock:
             decision = joint.auto.command(nonzero, self._clock(), facts)

@@ -7,7 +7,7 @@ node's clock by one offset. A tripped drive's reading is not published (the inte
 on); an outage interrupts the integration, so the next reading adds no area.
 """
 
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, List, Tuple
 
 from builtin_interfaces.msg import Time
 from drive_bridge.bus.events import (
@@ -26,19 +26,18 @@ class JointStates:
 
     ``publish`` sends a JointState; ``is_active`` tells whether the node takes commands (an
     automatic stop is decided on a reading only then); ``stamp_offset_ns`` moves the bus clock
-    (seconds) onto the node's clock (nanoseconds); ``batch``: one message per round of every
-    joint instead of one per reading (bench/joint_cpu.py).
+    (seconds) onto the node's clock (nanoseconds). One message per reading (docs/ros2_control.md,
+    "One message per joint, not batched").
     """
 
     def __init__(self, table: JointTable, starter: AutoStarter,
                  publish: Callable[[JointState], None], is_active: Callable[[], bool],
-                 stamp_offset_ns: int, batch: bool = False):
+                 stamp_offset_ns: int):
         self._table = table
         self._starter = starter
         self._publish = publish
         self._is_active = is_active
         self.stamp_offset_ns = stamp_offset_ns
-        self._batch: Optional[Dict[str, Tuple[int, float, float]]] = {} if batch else None
         self.event_handlers = handler_table({
             ReadingEvent: self._on_reading, DeviceOffline: self._interrupt,
             StateUnknown: self._interrupt, DeviceOnline: ignore, Notice: ignore})
@@ -66,28 +65,8 @@ class JointStates:
         if reading.tripped:
             return  # never published while tripped (the integration goes on)
         stamp_ns = int(round(event.stamp_s * 1e9)) + self.stamp_offset_ns
-        if self._batch is None:
-            self._send([(joint.spec.name, position, velocity)], stamp_ns)
-            joint.published += 1
-        else:
-            self._add_to_batch(joint, stamp_ns, position, velocity)
-
-    def _add_to_batch(self, joint: Joint, stamp_ns: int, position: float,
-                      velocity: float) -> None:
-        batch = self._batch
-        if joint.spec.name in batch:
-            self._flush()
-        batch[joint.spec.name] = (stamp_ns, position, velocity)
+        self._send([(joint.spec.name, position, velocity)], stamp_ns)
         joint.published += 1
-        if len(batch) == len(self._table.by_device):
-            self._flush()
-
-    def _flush(self) -> None:
-        entries, self._batch = self._batch, {}
-        if entries:
-            self._send([(name, position, velocity)
-                        for name, (_, position, velocity) in entries.items()],
-                       max(stamp for stamp, _, _ in entries.values()))
 
     def _send(self, entries: List[Entry], stamp_ns: int) -> None:
         message = JointState()

@@ -41,7 +41,7 @@ class JointValues:
 
     def commands_status(self, name: str) -> DiagnosticStatus:
         """Return the status of ``~/joint_commands`` (``name`` from status_name)."""
-        counts = self._counts
+        counts = self._counts.copy()
         counters = counts.counters
         by_device, by_name = self._table.by_device, self._table.by_name
         status = DiagnosticStatus(name=name, hardware_id='ros2_control joint commands')
