@@ -386,14 +386,19 @@ def _publish_once(joints, names, velocities=None):
     joints.publisher.publish(message)
 
 
-def test_bad_commands_are_refused_and_nothing_is_sent(node, joints, wheels):
-    left, right = wheels
+def _hold_a_good_command(node, joints, left, right):
+    """Stop both drives, command 2 rad/s until both references are written, stop sending."""
     for device in DEVICES:  # a stop: the stop image is kept alive with the reference in force
         assert node.call(device, 'stop').success
     joints.command(left_wheel_joint=2.0, right_wheel_joint=2.0)
     assert joints.spin_until(
         lambda: left.reference_word == 0x0666 and right.reference_word == 0xF99A)
     joints.sending = False
+
+
+def test_bad_commands_are_refused_and_nothing_is_sent(node, joints, wheels):
+    left, right = wheels
+    _hold_a_good_command(node, joints, left, right)
     joints.spin_for(0.2)
     assert node.wait_fresh_diagnostics()
     rejected = _counter(node, 'left', 'rejected_references')
@@ -432,12 +437,7 @@ def _malformed_commands():
 def test_malformed_bytes_say_why_in_one_line_send_nothing_and_the_node_lives(
         node, joints, wheels):
     left, right = wheels
-    for device in DEVICES:  # a stop: the stop image is kept alive with the reference in force
-        assert node.call(device, 'stop').success
-    joints.command(left_wheel_joint=2.0, right_wheel_joint=2.0)
-    assert joints.spin_until(
-        lambda: left.reference_word == 0x0666 and right.reference_word == 0xF99A)
-    joints.sending = False
+    _hold_a_good_command(node, joints, left, right)
     joints.spin_for(1.1)  # the log throttle's period: the first malformed message is logged
     assert node.wait_fresh_diagnostics()
     before = int(command_counters(node)['messages_malformed'])
