@@ -16,6 +16,9 @@ HALF_SPEED = 0x2000
 SIM_SETTINGS = {'ramp_up_s': 0.2, 'ramp_down_s': 0.2}
 
 
+BAD_REPLY_QUIET_S = 0.2  # the line is quiet: the rest of a bad reply has come
+
+
 class RawMaster:
     """
     A master that writes encoded telegrams and reads replies by their length.
@@ -38,13 +41,36 @@ class RawMaster:
         buffer = b''
         while True:
             result = fc.decode(buffer, address_byte, max_lge)
-            if result.telegram is not None or result.error or time.monotonic() > deadline:
+            if result.error:
+                return result, buffer + self._rest_of_a_bad_reply()
+            if result.telegram is not None or time.monotonic() > deadline:
                 return result, buffer
-            try:
-                buffer += self.port.read(max(1, min(self.port.in_waiting, result.missing)))
-            except serial.SerialException as error:
-                if 'returned no data' not in str(error):
-                    raise
+            buffer += self._read(max(1, min(self.port.in_waiting, result.missing)))
+
+    def _read(self, count: int) -> bytes:
+        try:
+            return self.port.read(count)
+        except serial.SerialException as error:
+            if 'returned no data' not in str(error):
+                raise
+            return b''
+
+    def _rest_of_a_bad_reply(self) -> bytes:
+        """
+        Read what follows a reply found bad from its first bytes, until the line is quiet.
+
+        A pty hands a write over to the reader in pieces, at the pace of a kernel worker:
+        on a loaded machine the rest of a garbage reply can arrive after the next request's
+        input flush and would be read as the start of the next reply.
+        """
+        rest = b''
+        quiet_since = time.monotonic()
+        while time.monotonic() - quiet_since < BAD_REPLY_QUIET_S:
+            data = self._read(max(1, self.port.in_waiting))
+            if data:
+                rest += data
+                quiet_since = time.monotonic()
+        return rest
 
     def send(self, address: int, request: fc.FcTelegramRequest, **kwargs) -> tuple:
         telegram = request.telegram(address, self.address_format)
