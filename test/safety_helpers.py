@@ -300,20 +300,27 @@ while True:
 """
 
 
+# What a babbling RS-485 line can carry at most: 115200 baud, 10 bits a character.
+LINE_BYTES_PER_S = 11_520
+
+
 class Babbler:
     """
     A device that keeps talking: child processes writing bytes to a pty master.
 
     Processes of their own (not threads), so the test process's GIL cannot pause them, and
-    ``processes`` of them, so that a loaded machine seldom pauses them all at once; bytes
-    come every ``period_s`` in chunks, far faster than the bridge drains a silence.
+    ``processes`` of them, so that a loaded machine seldom pauses them all at once. Together
+    they write ``pattern`` at the byte rate of a 115200 baud line (a chunk every 1.4 ms on
+    the line, each process every 2.8 ms: pauses far shorter than the 5 ms silence the
+    bridge drains to): what a real line can do. A flood as fast as the processes could
+    write (64 kB/s) starved the kernel's pty delivery for every pty on the machine, for
+    seconds beside a CPU hog: other tests' simulators read nothing for 1.1 s (issue 27).
     """
 
-    def __init__(self, fd: int, pattern: bytes = b'\xff' * 16, period_s: float = 0.0005,
-                 processes: int = 2):
+    def __init__(self, fd: int, pattern: bytes = b'\xff' * 16, processes: int = 2):
         self.fd = fd
         self.pattern = pattern
-        self.period_s = period_s
+        self.period_s = processes * len(pattern) / LINE_BYTES_PER_S
         self.count = processes
         self.processes: List[subprocess.Popen] = []
 

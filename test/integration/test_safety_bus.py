@@ -1,8 +1,9 @@
 """
 Safety case 1 below the node: a babbling line against every transport and the bus master.
 
-A device that keeps talking is a child process writing bytes to the pty master without a
-pause (:class:`safety_helpers.Babbler`). Every read and drain loop must end at the
+A device that keeps talking is two child processes writing bytes to the pty master at a
+115200 baud line's byte rate, never pausing as long as the bridge's drain silence
+(:class:`safety_helpers.Babbler`). Every read and drain loop must end at the
 transaction's deadline, and the line must be counted as babbling (a link fault, ``babble``)
 rather than as a bad reply. On the bus, a command answered as failed must never reach the
 device afterwards.
@@ -24,8 +25,8 @@ from pymodbus_use import marked_params
 import pytest
 from safety_helpers import Babbler, MCD_START, McdProbe, sim_pty_master, spy_starts, wait_for
 
-# One worker runs these one after the other (scripts/test.sh: --dist loadgroup): each babbler is
-# a process that writes as fast as it can, and several at once held reads for seconds.
+# One worker runs these one after the other (scripts/test.sh: --dist loadgroup): several
+# babblers at once load the kernel's pty delivery for every other test too.
 pytestmark = pytest.mark.xdist_group('babbling_lines')
 TIMEOUT_S = 0.3
 PATTERNS = {'ff': b'\xff' * 16, 'frames': b'\x14\x03\x0c' * 6, 'nak': b'\x15' * 8,
