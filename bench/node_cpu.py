@@ -82,12 +82,17 @@ def listen(names: List[str]) -> None:
             node.create_subscription(kind, f'{name}/{topic}', count, 10)
     node.create_subscription(DiagnosticArray, '/diagnostics', count, 10)
     print('listening', flush=True)
+    spin_until_shutdown(node)
+    print(f'received {received[0]}', flush=True)
+
+
+def spin_until_shutdown(node) -> None:
+    """Spin ``node`` until SIGTERM shuts rclpy down (the child processes' main loop)."""
     try:
         while rclpy.ok():
             rclpy.spin_once(node, timeout_sec=0.5)
     except Exception:  # noqa: B902 - the context shut down under spin_once
         pass
-    print(f'received {received[0]}', flush=True)
 
 
 def call_triggers(rate_hz: float, names: List[str]) -> None:
@@ -110,11 +115,7 @@ def call_triggers(rate_hz: float, names: List[str]) -> None:
         counts['sent'] += 1
     node.create_timer(1.0 / rate_hz, call)
     print('calling', flush=True)
-    try:
-        while rclpy.ok():
-            rclpy.spin_once(node, timeout_sec=0.5)
-    except Exception:  # noqa: B902 - the context shut down under spin_once
-        pass
+    spin_until_shutdown(node)
     print(f'sent {counts["sent"]}, answered {counts["answered"]}, succeeded '
           f'{counts["succeeded"]}', flush=True)
 
