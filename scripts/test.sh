@@ -1,16 +1,17 @@
 #!/usr/bin/env bash
 # Run the whole test suite, what CI runs (.ci/run), and print each step's wall and CPU time.
 # Every test function runs once, the ones marked pymodbus once more with pymodbus 3.6.9.
-# Two lanes run side by side, then the ROS tier alone:
-#   lane 1 (waits on the wire and the clock more than it computes):
+# Two lanes run side by side:
+#   lane 1 (normal priority): the tests with deadlines, one tier after another
 #     integration tier            pytest in .venv (pymodbus 3.16), pytest-xdist workers
 #     integration tier: realtime  the tests whose threads must run within milliseconds
 #     pymodbus 3.6.9              the tests marked pymodbus, in .venv-pymodbus369
+#     ROS tier                    pytest in .venv, pytest-xdist workers
 #   lane 2 (computes, no deadlines; in the idle scheduling class, so lane 1 keeps its times):
 #     docs                        scripts/docs.sh (Sphinx, every warning an error)
 #     colcon build, installed commands, then colcon test: the unit tier and the linters,
 #                                 against the install space
-#   then the ROS tier             pytest in .venv, pytest-xdist workers
+#   Lane 2's output is printed when both lanes are done.
 # A failing step does not stop the run: the other steps run, the table marks it FAILED and
 # the script exits 1. Arguments go to the pytest runs of the checkout (scripts/test.sh -x).
 # Workers per tier: UNIT_WORKERS, INTEGRATION_WORKERS, REALTIME_WORKERS, ROS_WORKERS
@@ -19,7 +20,7 @@ set -uo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 unit_workers=${UNIT_WORKERS:-2}
-integration_workers=${INTEGRATION_WORKERS:-2}
+integration_workers=${INTEGRATION_WORKERS:-4}
 realtime_workers=${REALTIME_WORKERS:-3}
 ros_workers=${ROS_WORKERS:-4}
 
@@ -137,9 +138,10 @@ lane_compute() {
 lane_compute > "$workspace/lane_compute.log" 2>&1 &
 compute_pid=$!
 lane_wire "$@"
+# The ROS tier computes more than it waits (a node's start costs about 1 s of CPU), so it runs
+# after the wire-bound steps, not beside them; lane 2 goes on in idle time.
+step 'ROS tier' pytest_in "$VENV" -n "$ros_workers" --dist loadgroup test/ros "$@"
 wait "$compute_pid"
 echo "== output of the docs and colcon steps"
 cat "$workspace/lane_compute.log"
-
-step 'ROS tier' pytest_in "$VENV" -n "$ros_workers" --dist loadgroup test/ros "$@"
 if grep -q 'FAILED$' "$steps"; then exit 1; fi
