@@ -62,10 +62,13 @@ class LineBabble(LinkDown):
 
 
 # Every transaction failure kind, in the order /diagnostics lists them. ``late_reply``: a
-# whole reply to an earlier request that came after its transaction gave up, dropped by the
-# native RTU engine (the transaction it came into still succeeds): raise the timeout.
+# whole reply to an earlier request that came after its transaction gave up, dropped by a
+# Modbus RTU engine (the transaction it came into still succeeds): raise the timeout.
+# ``late_bytes``: bytes found waiting before a Modbus RTU request and dropped, counted on the
+# device asked next: they came after the last transaction ended (a late reply, or noise), so
+# the reply that transaction took may have been an older one.
 FAILURE_KINDS = ('timeout', 'crc', 'wrong_address', 'truncated', 'bad_frame', 'exception',
-                 'nak', 'link', 'babble', 'late_reply')
+                 'nak', 'link', 'babble', 'late_reply', 'late_bytes')
 
 
 class DeviceException(TransportError):

@@ -77,16 +77,23 @@ def always_readable_fd() -> int:
 
 
 class ScriptedPort:
-    """A serial port whose wire holds ``reply`` bytes, all there at once (for transports)."""
+    """
+    A serial port whose wire holds ``reply`` bytes, all there at once (for transports).
 
-    def __init__(self, reply: bytes):
+    They count as waiting only once a request was written (``early``: before it too, as bytes
+    that came after the last transaction ended).
+    """
+
+    def __init__(self, reply: bytes, early: bool = False):
         self.reply = reply
         self.timeout = 0.0
+        self.written = early
 
     def reset_input_buffer(self):
         pass
 
     def write(self, data):
+        self.written = True
         return len(data)
 
     def read(self, count):
@@ -95,7 +102,7 @@ class ScriptedPort:
 
     @property
     def in_waiting(self):
-        return len(self.reply)
+        return len(self.reply) if self.written else 0
 
     def fileno(self):
         return always_readable_fd()

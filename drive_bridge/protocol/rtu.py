@@ -180,6 +180,55 @@ def decode_response(buffer: bytes, unit: int, function: int) -> ResponseResult:
                           needed=length)
 
 
+@dataclass(frozen=True)
+class NewestReply:
+    """
+    The newest reply of a unit to a function among whole frames that came back to back.
+
+    ``frame``: the last whole valid frame of the unit with the function (or its exception),
+    if any; ``frames``: how many whole valid frames were found, of any unit (every one but
+    ``frame`` is a late reply). ``needed``: when the bytes after the last whole frame begin a
+    reply of the unit to the function that is not whole yet, the buffer length that makes it
+    whole as far as its bytes tell (read up to it, then ask again), else 0. ``spoiled``: those
+    bytes are a whole reply of the unit to the function whose CRC is wrong. Bytes that begin
+    no frame of the unit (a stray byte, garbage) end the scan and are not counted.
+    """
+
+    frame: Optional[RtuFrame] = None
+    frames: int = 0
+    needed: int = 0
+    spoiled: bool = False
+
+
+def _begins_reply_of(buffer: bytes, unit: int, function: int) -> bool:
+    """Return whether ``buffer`` can be the start of a reply of ``unit`` to ``function``."""
+    return buffer[0] == unit and (len(buffer) < 2 or buffer[1] & 0x7F == function)
+
+
+def newest_reply(buffer: bytes, unit: int, function: int) -> NewestReply:
+    """
+    Return the newest reply of ``unit`` to ``function`` in ``buffer`` (see NewestReply).
+
+    RTU has no transaction id, and a device answers requests in order: of several whole
+    replies received back to back, the last one answers the latest request. Never raises.
+    """
+    frame, frames, start = None, 0, 0
+    while start < len(buffer):
+        rest = buffer[start:]
+        length = response_length(rest)
+        ours = _begins_reply_of(rest, unit, function)
+        if length is None or len(rest) < length:
+            whole_length = length or max(len(rest) + 1, 3)
+            return NewestReply(frame, frames, start + whole_length if ours else 0)
+        if not crc_ok(rest[:length]):
+            return NewestReply(frame, frames, spoiled=ours)
+        frames += 1
+        if ours:
+            frame = RtuFrame(rest[0], rest[1], bytes(rest[2:length - 2]))
+        start += length
+    return NewestReply(frame, frames)
+
+
 def read_registers_request(unit: int, address: int, count: int) -> RtuFrame:
     """Return a function 03 request for ``count`` registers from frame address ``address``."""
     return RtuFrame(unit, READ_HOLDING_REGISTERS, struct.pack('>HH', address, count))

@@ -13,12 +13,14 @@ import logging
 import time
 from typing import List, Optional
 
-from drive_bridge.errors import BadFrame, DeviceException, LineBabble, LinkDown, NoResponse
+from drive_bridge.errors import (
+    BadFrame, DeviceException, LineBabble, LinkDown, NoResponse, TransportError)
 from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import (  # noqa: F401 - LinkSettings, wire_time_s re-exported
     LinkSettings, port_framing, port_missing, PortFraming, wire_time_s)
+from drive_bridge.transport.modbus_replies import settle, TappedSerialClient
 from drive_bridge.transport.port_owner import in_use_text, lock_holders
 from drive_bridge.transport.serial_port import note_framing, open_serial, PORT_ERRORS
 import pymodbus
@@ -110,7 +112,7 @@ class ModbusTransport(Transport):
             common.update(retry_on_empty=False, reconnect_delay=0)
             serial_extra['strict'] = False
         if framing is not None:
-            return ModbusSerialClient(
+            return TappedSerialClient(
                 port=settings.port, framer=_Framer.RTU, baudrate=settings.baudrate,
                 bytesize=8, parity=framing.parity, stopbits=framing.stopbits,
                 handle_local_echo=settings.local_echo, **serial_extra, **common)
@@ -141,6 +143,20 @@ class ModbusTransport(Transport):
         if handler is None:
             raise TypeError(f'unsupported transaction {transaction!r}')
         self._received.clear()
+        self.last_recovered = {}
+        client, deadline = self._client, time.monotonic() + self.settings.timeout_s
+        if not isinstance(client, TappedSerialClient):  # not a serial line
+            return self._run(handler, unit, transaction)
+        try:
+            outcome, failure = self._run(handler, unit, transaction), None
+        except LinkDown:
+            raise
+        except TransportError as error:
+            outcome, failure = None, error
+        return settle(client, unit, transaction, deadline, outcome, failure, self.last_recovered)
+
+    def _run(self, handler, unit: int, transaction) -> Optional[list]:
+        """Run the transaction through pymodbus; raise its failure as a typed error."""
         try:
             return handler(self, {_UNIT_KEYWORD: unit}, transaction)
         except ConnectionException as error:

@@ -45,6 +45,8 @@ class RtuSerialTransport(SerialPortTransport):
 
     def _exchange(self, request: ModbusRequest, frame: RtuFrame) -> RtuFrame:
         port = self._port
+        if port.in_waiting:  # bytes that came after the last transaction ended
+            self._count_recovered('late_bytes')
         port.reset_input_buffer()  # a late reply to an earlier request must not count
         encoded = frame.encode()
         deadline = time.monotonic() + self.settings.timeout_s
@@ -77,7 +79,7 @@ class RtuSerialTransport(SerialPortTransport):
             buffer += self._read(needed - len(buffer), deadline)
             result = rtu.decode_response(buffer, unit, function)
             if result.frame is not None:
-                return result.frame
+                return self._newest_reply(result.frame, unit, function, deadline)
             if result.error_kind in _NOT_OURS:
                 not_ours = result
                 skipped, buffer = self._skip_late_reply(buffer, deadline)
@@ -88,8 +90,7 @@ class RtuSerialTransport(SerialPortTransport):
                         error_type = _INVALID_REPLY.get(not_ours.error_kind, BadFrame)
                         raise error_type(f'invalid reply ({not_ours.error}) and no other '
                                          f'within {self.settings.timeout_s:g} s')
-                    self.last_recovered['late_reply'] = \
-                        self.last_recovered.get('late_reply', 0) + 1
+                    self._count_recovered('late_reply')
                     needed, awaited = rtu.MIN_RESPONSE_BYTES, 0
                     continue
                 result = rtu.decode_response(buffer, unit, function)
@@ -108,6 +109,42 @@ class RtuSerialTransport(SerialPortTransport):
             if needed > awaited:  # not slept for yet (a second sleep would wake late)
                 self._await_bytes(needed - len(buffer), self._char_s, deadline)
                 awaited = needed
+
+    def _newest_reply(self, reply: RtuFrame, unit: int, function: int,
+                      deadline: float) -> RtuFrame:
+        """
+        Return ``reply``, or a newer reply of ``unit`` to ``function`` that came right after it.
+
+        RTU has no transaction id: a device that answered an earlier request late answers it
+        and then this one, and both replies can arrive at once. Devices answer in order, so of
+        whole valid replies waiting back to back the last one is the newest and is taken; the
+        others count as late replies. Only bytes already there are looked at (no wait on a
+        clean line, where nothing follows a reply); a reply of the unit to the function that
+        has begun is waited for (up to the deadline). If it does not complete, or its CRC is
+        wrong, the transaction fails: ``reply`` may be the late one. Bytes that begin no such
+        reply (a stray byte) leave ``reply`` as it is.
+        """
+        tail = self._read_some(rtu.MAX_ADU_BYTES, 0.0)
+        if not tail:
+            return reply
+        newest = rtu.newest_reply(tail, unit, function)
+        while newest.needed:
+            tail += self._read(newest.needed - len(tail), deadline)
+            if len(tail) < newest.needed:
+                raise TruncatedFrame(f'a second reply began after the reply and was not whole '
+                                     f'within {self.settings.timeout_s:g} s (the first may be '
+                                     'a late one)')
+            newest = rtu.newest_reply(tail, unit, function)
+        if newest.spoiled:
+            raise CrcError('a second reply with a CRC error came after the reply (the first '
+                           'may be a late one)')
+        self._count_recovered('late_reply', newest.frames)
+        return newest.frame or reply
+
+    def _count_recovered(self, kind: str, count: int = 1) -> None:
+        """Count ``count`` failures of ``kind`` the transaction recovered from."""
+        if count:
+            self.last_recovered[kind] = self.last_recovered.get(kind, 0) + count
 
     def _skip_late_reply(self, buffer: bytes, deadline: float) -> Tuple[bool, bytes]:
         """

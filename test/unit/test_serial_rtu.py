@@ -1,6 +1,6 @@
-"""The native RTU engine: a late reply to an earlier request before the reply asked for."""
+"""The native RTU engine: late replies before and after the reply asked for."""
 
-from drive_bridge.errors import BadFrame, FAILURE_KINDS, WrongAddress
+from drive_bridge.errors import BadFrame, CrcError, FAILURE_KINDS, TruncatedFrame, WrongAddress
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.transport.link import LinkSettings
@@ -59,3 +59,56 @@ def test_the_counter_starts_again_with_each_transaction():
     transport._port = ScriptedPort(registers_reply(20, [5, 6, 7]))
     assert transport.execute(20, ReadRegisters(0, 3)) == [5, 6, 7]
     assert transport.last_recovered == {}
+
+
+NEWER = registers_reply(20, [5, 6, 7])
+
+
+def test_of_replies_back_to_back_the_last_whole_one_is_taken():
+    transport = transport_with(registers_reply(20, [1, 2, 3]) + LATE_FROM_ANOTHER_DEVICE + NEWER)
+    assert transport.execute(20, ReadRegisters(0, 3)) == [5, 6, 7]
+    assert transport.last_recovered == {'late_reply': 2}
+
+
+@pytest.mark.parametrize('stray', [b'\x00', b'\xff\xff', b'\x15\x03'])
+def test_bytes_that_begin_no_reply_of_the_unit_leave_the_reply_as_it_is(stray):
+    transport = transport_with(registers_reply(20, [1, 2, 3]) + stray)
+    assert transport.execute(20, ReadRegisters(0, 3)) == [1, 2, 3]
+    assert transport.last_recovered == {}
+
+
+def test_a_second_reply_that_is_not_whole_fails_the_transaction():
+    transport = transport_with(registers_reply(20, [1, 2, 3]) + NEWER[:6])
+    with pytest.raises(TruncatedFrame, match='the first may be a late one'):
+        transport.execute(20, ReadRegisters(0, 3))
+
+
+def test_a_second_reply_with_a_crc_error_fails_the_transaction():
+    transport = transport_with(registers_reply(20, [1, 2, 3]) + NEWER[:-1] + b'\x00')
+    with pytest.raises(CrcError, match='the first may be a late one'):
+        transport.execute(20, ReadRegisters(0, 3))
+
+
+def test_bytes_waiting_before_the_request_are_counted_as_late_bytes():
+    transport = transport_with(b'')
+    transport._port = ScriptedPort(NEWER, early=True)  # there before the request was written
+    assert transport.execute(20, ReadRegisters(0, 3)) == [5, 6, 7]
+    assert transport.last_recovered == {'late_bytes': 1}
+
+
+@pytest.mark.parametrize('buffer, expected', [
+    (NEWER, (NEWER, 1, 0, False)),
+    (registers_reply(20, [1]) + NEWER, (NEWER, 2, 0, False)),
+    (NEWER + LATE_FROM_ANOTHER_DEVICE, (NEWER, 2, 0, False)),
+    (LATE_FROM_ANOTHER_DEVICE, (None, 1, 0, False)),
+    (NEWER + NEWER[:1], (NEWER, 1, len(NEWER) + 3, False)),
+    (NEWER + NEWER[:4], (NEWER, 1, 2 * len(NEWER), False)),
+    (NEWER + NEWER[:-1] + b'\x00', (NEWER, 1, 0, True)),
+    (NEWER + b'\x00' + NEWER, (NEWER, 1, 0, False)),  # garbage ends the scan
+    (rtu.exception_response(20, 3, 2).encode() + b'\x00',
+     (rtu.exception_response(20, 3, 2).encode(), 1, 0, False)),
+])
+def test_newest_reply_scans_whole_frames_back_to_back(buffer, expected):
+    newest = rtu.newest_reply(buffer, 20, 3)
+    frame = newest.frame.encode() if newest.frame else None
+    assert (frame, newest.frames, newest.needed, newest.spoiled) == expected
