@@ -1,5 +1,8 @@
 """The transport registry: one factory per protocol in the protocol table, and which it builds."""
 
+import subprocess
+import sys
+
 from drive_bridge.transport.ap_ascii import ApAsciiTransport
 from drive_bridge.transport.engines import make_transport, TRANSPORTS
 from drive_bridge.transport.fc_protocol import FcProtocolTransport
@@ -32,3 +35,13 @@ def test_the_transport_of_each_protocol_is_built_without_opening_the_link(
         protocol, options, expected):
     link = LinkSettings(protocol=protocol, port='/nonexistent/ttyNONE', tcp_port=1)
     assert type(make_transport(link, options)) is expected
+
+
+@pytest.mark.parametrize('module', ['drive_bridge.transport.engines', 'drive_bridge.config'])
+def test_pymodbus_is_imported_only_by_a_transport_that_uses_it(module):
+    """Every node start and CLI command imports the registry; pymodbus costs ~0.1 s of CPU."""
+    probe = (f'import sys, {module}; '
+             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'pymodbus'))")
+    done = subprocess.run([sys.executable, '-c', probe], capture_output=True, text=True,
+                          timeout=60, check=True)
+    assert done.stdout.strip() == '[]', done.stdout
