@@ -101,6 +101,8 @@ class BridgeSession:
             bridges = self.bridges()
             if bridges and not first_seen:
                 first_seen.append(time.monotonic())
+            if not self._seen_at and (self.namespace, self.name) in bridges:
+                self._seen_at = time.monotonic()  # the default node: find_node's wait is over
             return [bridge for bridge in bridges if full_name in self._listed(names, *bridge)]
 
         def settled() -> bool:
@@ -109,12 +111,14 @@ class BridgeSession:
         self.spin_until(settled, self.timeout_s)
         found = owner()
         if found:
+            if found[0] != (self.namespace, self.name):
+                self._seen_at = 0.0  # another node: find_node finds it (at once)
             self.namespace, self.name = found[0]
             self.full_name = _full(*found[0])
             return
         if not first_seen:
             raise self._no_node()
-        if (self.namespace, self.name) in self.bridges():
+        if self._seen_at:
             return  # the default node is there: its own check names what it has
         offered = [f'{_full(*bridge)}: {self.listing(sorted(self._listed(names, *bridge)))}'
                    for bridge in self.bridges()]
