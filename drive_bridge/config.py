@@ -9,8 +9,11 @@ parameter and the allowed values.
 """
 
 from dataclasses import dataclass, field
+import math
 import re
-from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Set, Tuple
+import sys
+from typing import (
+    Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Set, Tuple, Union)
 
 from drive_bridge.bus.master import BusTiming, DeviceSpec
 from drive_bridge.devices.contracts import Family
@@ -514,13 +517,68 @@ def duplicate_key_loader():
     return UniqueKeyLoader
 
 
-# rcl's parameters file parser (rcl_yaml_param_parser, parse.c) reads these plain (unquoted)
-# values as booleans too, where PyYAML reads text; and it reads every key as a name, where
-# PyYAML reads ``on:`` or ``n:`` as a boolean. So that a file means to drive-bridge what it
-# means to the node (``parity: N`` is false to both), it is read as rcl reads it.
-RCL_ONLY_BOOLEANS = {'y': True, 'Y': True, 'n': False, 'N': False}
+# rcl's parameters file parser (rcl_yaml_param_parser, parse.c get_value, Jazzy: rcl 9.2)
+# types a plain (unquoted, untagged) scalar in this order: one of its boolean words; an integer
+# if strtoll(text, base 0) takes the whole text within int64 (10, -3, 0x1A, 010 = 8); a double
+# if strtod takes the whole text without a range error (1e-1, 1.0e-1, -2E3, 1.0e5, .5, inf,
+# nan, 0x1p3, and .nan, .inf, -.inf); else text. PyYAML (YAML 1.1) reads 1e-1 and -2E3 as
+# text, y/n as text, 1_000 and 1:30 as integers and 2024-01-02 as a date; rcl does not. So
+# that a file means to drive-bridge what it means to the node (``parity: N`` is false to both,
+# ``timeout: 5e-1`` is 0.5 to both), plain scalars are typed as rcl types them. Keys are names
+# to rcl, whatever they read like; an empty or null-looking value stays None (rcl refuses an
+# empty value, and reads ``null`` and ``~`` as text; both are refused by the node's checks).
+RCL_BOOLEANS = dict.fromkeys(('Y', 'y', 'yes', 'Yes', 'YES', 'true', 'True', 'TRUE', 'on',
+                              'On', 'ON'), True)
+RCL_BOOLEANS.update(dict.fromkeys(('N', 'n', 'no', 'No', 'NO', 'false', 'False', 'FALSE',
+                                   'off', 'Off', 'OFF'), False))
+RCL_SPECIAL_DOUBLES = {f'{sign}.{word}': float(f'{sign or "+"}{word}') for sign in ('', '+', '-')
+                       for word in ('inf', 'Inf', 'INF')}
+RCL_SPECIAL_DOUBLES.update({f'.{word}': math.nan for word in ('nan', 'NaN', 'NAN')})
+YAML_NULLS = ('', '~', 'null', 'Null', 'NULL')
 RCL_BOOLEAN_TAG = 'tag:drive_bridge,2026:rcl_boolean'
+RCL_NUMBER_TAG = 'tag:drive_bridge,2026:rcl_number'
 YAML_STR_TAG = 'tag:yaml.org,2002:str'
+INT64 = (-2 ** 63, 2 ** 63 - 1)
+# What strtoll (base 0) and strtod take whole, after the optional sign.
+STRTOLL_TEXT = re.compile(r'[+-]?(0[xX][0-9a-fA-F]+|0[0-7]*|[1-9][0-9]*)\Z')
+STRTOD_DECIMAL = re.compile(r'[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?\Z')
+STRTOD_HEX = re.compile(r'([+-]?)0[xX](([0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9a-fA-F]+)'
+                        r'([pP][+-]?[0-9]+)?)\Z')
+STRTOD_WORD = re.compile(r'[+-]?(inf|infinity|nan(\([0-9a-zA-Z_]*\))?)\Z', re.IGNORECASE)
+
+
+def rcl_number(text: str) -> Optional[Union[int, float]]:
+    """Return ``text`` as the number rcl reads in a plain scalar, or None if rcl reads text."""
+    if text in RCL_SPECIAL_DOUBLES:
+        return RCL_SPECIAL_DOUBLES[text]
+    if STRTOLL_TEXT.match(text):
+        digits = text.lstrip('+-')
+        base = 16 if digits[:2] in ('0x', '0X') else 8 if digits.startswith('0') else 10
+        value = (-1 if text.startswith('-') else 1) * int(digits, base)
+        if INT64[0] <= value <= INT64[1]:
+            return value  # else strtoll's range error: strtod reads it below
+    if STRTOD_WORD.match(text):
+        return float(text.split('(')[0])
+    hexadecimal = STRTOD_HEX.match(text)
+    if hexadecimal:
+        value = float.fromhex(f'{hexadecimal.group(1)}0x{hexadecimal.group(2)}')
+    elif STRTOD_DECIMAL.match(text):
+        value = float(text)
+    else:
+        return None
+    digits = text.lower().split('p' if hexadecimal else 'e')[0]
+    if math.isinf(value) or (abs(value) < sys.float_info.min and digits.strip('+-0x.')):
+        return None  # strtod's range error (overflow, or underflow of a non-zero value): text
+    return value
+
+
+def rcl_scalar_tag(text: str) -> Optional[str]:
+    """Return the tag of a plain scalar as rcl types it (None: null, as YAML reads it)."""
+    if text in YAML_NULLS:
+        return None
+    if text in RCL_BOOLEANS:
+        return RCL_BOOLEAN_TAG
+    return RCL_NUMBER_TAG if rcl_number(text) is not None else YAML_STR_TAG
 
 
 def parameters_file_loader():
@@ -531,6 +589,14 @@ def parameters_file_loader():
     class ParametersFileLoader(base):
         """Load a ROS 2 parameters file as the node reads it."""
 
+        def resolve(self, kind, value, implicit):
+            """Type a plain scalar as rcl does; anything else as YAML does."""
+            if kind is yaml.ScalarNode and implicit[0]:
+                tag = rcl_scalar_tag(value)
+                if tag is not None:
+                    return tag
+            return super().resolve(kind, value, implicit)
+
     def construct_mapping(loader, node, deep=False):
         for key_node, _ in node.value:
             if isinstance(key_node, yaml.ScalarNode):
@@ -540,10 +606,10 @@ def parameters_file_loader():
 
     ParametersFileLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
                                          construct_mapping)
-    ParametersFileLoader.add_implicit_resolver(
-        RCL_BOOLEAN_TAG, re.compile(r'^[yYnN]$'), list(RCL_ONLY_BOOLEANS))
     ParametersFileLoader.add_constructor(
-        RCL_BOOLEAN_TAG, lambda loader, node: RCL_ONLY_BOOLEANS[loader.construct_scalar(node)])
+        RCL_BOOLEAN_TAG, lambda loader, node: RCL_BOOLEANS[loader.construct_scalar(node)])
+    ParametersFileLoader.add_constructor(
+        RCL_NUMBER_TAG, lambda loader, node: rcl_number(loader.construct_scalar(node)))
     return ParametersFileLoader
 
 

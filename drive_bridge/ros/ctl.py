@@ -118,6 +118,7 @@ def _parser() -> argparse.ArgumentParser:
 def parse_args(argv: List[str]) -> argparse.Namespace:
     """Parse and check the command line; raise BadInput with one line."""
     args = _parser().parse_args(argv)
+    args.bridge_chosen = hasattr(args, 'bridge_node') or hasattr(args, 'bridge_namespace')
     args.bridge_namespace, args.bridge_node = node_name(getattr(args, 'bridge_node', ''),
                                                         getattr(args, 'bridge_namespace', ''))
     args.timeout = getattr(args, 'timeout', DEFAULT_TIMEOUT_S)
@@ -177,7 +178,8 @@ def main(argv: Optional[List[str]] = None) -> int:
                              f'{str(error).splitlines()[0]}'))
     node = rclpy.create_node(f'{PROG}_{os.getpid()}', start_parameter_services=False,
                              enable_rosout=False)
-    session = BridgeSession(node, args.bridge_namespace, args.bridge_node, args.timeout, stop)
+    session = BridgeSession(node, args.bridge_namespace, args.bridge_node, args.timeout, stop,
+                            chosen=args.bridge_chosen)
     try:
         return run(session, args)
     except CtlError as error:

@@ -10,6 +10,7 @@ import importlib
 import math
 from typing import Any, List, Optional
 
+from drive_bridge.ros.command_inputs import COMMANDS_NODE_SUFFIX
 from drive_bridge.ros.ctl_session import BridgeSession, Interrupted
 from drive_bridge.ros.ctl_values import BadInput, message_text, Refused, resolve
 from lifecycle_msgs.msg import Transition
@@ -29,6 +30,8 @@ HIDDEN_TOPICS = ('/rosout', '/parameter_events')
 def call(session: BridgeSession, service_name: str) -> int:
     """Call a Trigger service of the bridge once; exit status 0 on success, 1 if refused."""
     service = resolve(service_name, session.namespace, is_service=True)
+    if service_name.startswith('/'):
+        session.take_owner_of(service, _triggers(session), 'the Trigger services')
     client = session.node.create_client(Trigger, service)
     if not session.wait_for(client.service_is_ready,
                             lambda: TRIGGER in session.services().get(service, ())):
@@ -41,7 +44,7 @@ def call(session: BridgeSession, service_name: str) -> int:
         hint = session.listing(triggers) if triggers else \
             'none: is it configured? see: lifecycle get'
         raise BadInput(f'{session.full_name} has no service {service} (its Trigger services: '
-                       f'{hint})')
+                       f'{hint}){_without_node_name(session, service, triggers)}')
     future = client.call_async(Trigger.Request())
     unknown = 'it may have been executed; look at the device state before calling again'
     try:
@@ -53,10 +56,45 @@ def call(session: BridgeSession, service_name: str) -> int:
     return 0 if response.success else 1
 
 
+def _triggers(session: BridgeSession):
+    """Return a lister of a bridge node's Trigger services (full names)."""
+    def triggers(namespace: str, name: str) -> List[str]:
+        return [service for service, types in
+                session.node.get_service_names_and_types_by_node(name, namespace)
+                if TRIGGER in types]
+    return triggers
+
+
+def _topics(session: BridgeSession, suffix: str = '', subscribed: bool = False):
+    """Return a lister of a bridge node's published (or subscribed) topics ending in suffix."""
+    def topics(namespace: str, name: str) -> List[str]:
+        if subscribed:  # the bridge's commands node takes the speed references
+            found = session.node.get_subscriber_names_and_types_by_node(
+                name + COMMANDS_NODE_SUFFIX, namespace)
+        else:
+            found = session.node.get_publisher_names_and_types_by_node(name, namespace)
+        return [topic for topic, _ in found
+                if topic.endswith(suffix) and topic not in HIDDEN_TOPICS]
+    return topics
+
+
+def _without_node_name(session: BridgeSession, service: str, triggers: List[str]) -> str:
+    """Return a hint for a service named under the node's name (/drive_bridge/feeder/start)."""
+    inside = service[len(session.full_name) + 1:] \
+        if service.startswith(session.full_name + '/') else ''
+    if inside not in triggers:
+        return ''
+    meant = resolve(inside, session.namespace, is_service=True)
+    return f': service names do not include the node name, did you mean {meant}?'
+
+
 def reference(session: BridgeSession, device: str, percent: float,
               rate_hz: Optional[float]) -> int:
     """Publish a speed reference once (delivered to the node), or at ``rate_hz`` until a signal."""
     topic = resolve(f'{device}/speed_reference', session.namespace)
+    if device.startswith('/'):
+        session.take_owner_of(topic, _topics(session, '/speed_reference', subscribed=True),
+                              'the speed reference topics')
     publisher = session.node.create_publisher(Float32, topic, 10)
 
     def listed() -> bool:
@@ -99,6 +137,8 @@ def reference(session: BridgeSession, device: str, percent: float,
 def state(session: BridgeSession, device: str) -> int:
     """Print the device's latched state."""
     topic = resolve(f'{device}/state', session.namespace)
+    if device.startswith('/'):
+        session.take_owner_of(topic, _topics(session, '/state'), 'the state topics')
     received: List[String] = []
     session.node.create_subscription(String, topic, received.append, LATCHED)
     if not session.wait_for(
@@ -121,6 +161,8 @@ def _by_bridge(session: BridgeSession, endpoints, name: str = '') -> bool:
 def echo(session: BridgeSession, topic_name: str, count: Optional[int]) -> int:
     """Print the messages on a topic, ``count`` of them (each within --timeout) or until Ctrl-C."""
     topic = resolve(topic_name, session.namespace)
+    if topic_name.startswith('/'):
+        session.take_owner_of(topic, _topics(session), 'the topics')
     if not session.wait_for(lambda: bool(session.node.get_publishers_info_by_topic(topic)),
                             lambda: False):
         published = sorted(name for name in session.publications() if name not in HIDDEN_TOPICS)

@@ -11,7 +11,7 @@ and one that is there gets ``--timeout`` to match the command's own client or pu
 import os
 import threading
 import time
-from typing import Callable, Dict, List
+from typing import Callable, Dict, Iterable, List, Tuple
 
 from drive_bridge.ros.command_inputs import COMMANDS_NODE_SUFFIX
 from drive_bridge.ros.ctl_values import BadInput, BRIDGE_NODE, Refused
@@ -31,11 +31,14 @@ class BridgeSession:
     """The command's node, the bridge node it talks to, and the waits between them."""
 
     def __init__(self, node: Node, namespace: str, name: str, timeout_s: float,
-                 stop: threading.Event):
+                 stop: threading.Event, chosen: bool = True):
         self.node = node
         self.namespace = namespace
         self.name = name
         self.full_name = f'{namespace.rstrip("/")}/{name}'
+        # False: neither --node nor --namespace was given, so a full name (/line1/feeder/start)
+        # may say which bridge node is meant (see take_owner_of).
+        self.chosen = chosen
         self.timeout_s = timeout_s
         self.stop = stop
         self._seen_at = 0.0
@@ -63,14 +66,70 @@ class BridgeSession:
         if self._seen_at:
             return
         if not self.spin_until(self._node_present, self.timeout_s):
-            others = sorted(f'{space.rstrip("/")}/{name}' for name, space in
-                            self.node.get_node_names_and_namespaces() if name == BRIDGE_NODE)
-            domain = os.environ.get('ROS_DOMAIN_ID') or '0'
-            hint = f'ROS_DOMAIN_ID {domain} has {", ".join(others)}: choose with --node' \
-                if others else f'is the bridge running, in ROS_DOMAIN_ID {domain} and this ' \
-                'namespace?'
-            raise BadInput(f'no node {self.full_name} within {self.timeout_s:g} s ({hint})')
+            raise self._no_node()
         self._seen_at = time.monotonic()
+
+    def _no_node(self) -> BadInput:
+        others = [_full(space, name) for space, name in self.bridges()]
+        domain = os.environ.get('ROS_DOMAIN_ID') or '0'
+        hint = f'ROS_DOMAIN_ID {domain} has {", ".join(others)}: choose with --node' \
+            if others else f'is the bridge running, in ROS_DOMAIN_ID {domain} and this ' \
+            'namespace?'
+        return BadInput(f'no node {self.full_name} within {self.timeout_s:g} s ({hint})')
+
+    def bridges(self) -> List[Tuple[str, str]]:
+        """Return (namespace, name) of every bridge node in the graph, sorted."""
+        return sorted((space, name) for name, space in
+                      self.node.get_node_names_and_namespaces() if name == BRIDGE_NODE)
+
+    def take_owner_of(self, full_name: str, names: Callable[[str, str], Iterable[str]],
+                      what: str) -> None:
+        """
+        Make the bridge node that has ``full_name`` the session's node, if none was chosen.
+
+        Without ``--node`` or ``--namespace``, a full name (``/line1/feeder/start``) says
+        which bridge node is meant: ``names(namespace, name)`` lists what a bridge node has
+        (its services, say). Bridge nodes are waited for as :meth:`find_node` waits; if none
+        of them has ``full_name`` GRACE_S after the first appeared, the default node's own
+        check follows when it is there, else BadInput names what they have (``what``).
+        """
+        if self.chosen:
+            return
+        first_seen: List[float] = []
+
+        def owner() -> List[Tuple[str, str]]:
+            bridges = self.bridges()
+            if bridges and not first_seen:
+                first_seen.append(time.monotonic())
+            if not self._seen_at and (self.namespace, self.name) in bridges:
+                self._seen_at = time.monotonic()  # the default node: find_node's wait is over
+            return [bridge for bridge in bridges if full_name in self._listed(names, *bridge)]
+
+        def settled() -> bool:
+            return bool(owner()) or bool(first_seen) and \
+                time.monotonic() >= first_seen[0] + GRACE_S
+        self.spin_until(settled, self.timeout_s)
+        found = owner()
+        if found:
+            if found[0] != (self.namespace, self.name):
+                self._seen_at = 0.0  # another node: find_node finds it (at once)
+            self.namespace, self.name = found[0]
+            self.full_name = _full(*found[0])
+            return
+        if not first_seen:
+            raise self._no_node()
+        if self._seen_at:
+            return  # the default node is there: its own check names what it has
+        offered = [f'{_full(*bridge)}: {self.listing(sorted(self._listed(names, *bridge)))}'
+                   for bridge in self.bridges()]
+        raise BadInput(f'no bridge node has {full_name} ({what} of {"; ".join(offered)})')
+
+    def _listed(self, names: Callable[[str, str], Iterable[str]], space: str,
+                name: str) -> List[str]:
+        try:
+            return list(names(space, name))
+        except NodeNameNonExistentError:
+            return []
 
     def _node_present(self) -> bool:
         return (self.name, self.namespace) in self.node.get_node_names_and_namespaces()
@@ -131,3 +190,8 @@ class BridgeSession:
     def listing(self, names: List[str]) -> str:
         """Return names for a message: ``a, b`` or ``none``."""
         return ', '.join(names) if names else 'none'
+
+
+def _full(namespace: str, name: str) -> str:
+    """Return a node's full name (/line1/drive_bridge)."""
+    return f'{namespace.rstrip("/")}/{name}'

@@ -414,10 +414,24 @@ class Progress:
 
 
 # -- status and monitor ---------------------------------------------------------------------
+# Details that repeat the state or the trip as the raw code the device gave: the state's
+# name and the trip's text are printed instead (as the node publishes them on <name>/state
+# and <name>/trip), and an unknown state code is named in a warning line.
+RAW_CODE_DETAILS = frozenset({'state_code', 'trip_code_register', 'trip_code_reply',
+                              'mcd200_state'})
+
+
+def trip_text(reading: DeviceReading) -> str:
+    """Return the trip as a user reads it: its text and code (the node's trip, trip_code)."""
+    if not reading.trip_code and not reading.trip_name:
+        return 'none'
+    return f'{reading.trip_name or "code not known"} (trip code {reading.trip_code})'
+
+
 def reading_lines(reading: DeviceReading) -> List[str]:
-    """Return a reading as 'key: value' lines."""
+    """Return a reading as 'key: value' lines, in the words a user reads."""
     lines = [f'state: {reading.state}', f'status word: 0x{reading.status_word:04X}',
-             f'trip: {reading.trip_code} {reading.trip_name}'.rstrip()]
+             f'trip: {trip_text(reading)}']
     for label, value, unit in (('motor current', reading.motor_current_a, 'A'),
                                ('motor temperature', reading.motor_temperature_pct, '%'),
                                ('speed feedback', reading.speed_feedback_pct, '%')):
@@ -427,7 +441,8 @@ def reading_lines(reading: DeviceReading) -> List[str]:
                         ('warning word', reading.warning_word)):
         if word is not None:
             lines.append(f'{label}: 0x{word:08X}')
-    lines += [f'{key}: {value}' for key, value in reading.details.items()]
+    lines += [f'{key}: {value}' for key, value in reading.details.items()
+              if key not in RAW_CODE_DETAILS]
     lines += [f'warning: {text}' for text in reading.warnings]
     if reading.fault:
         lines.append(f'fault: {reading.fault}')
@@ -1008,7 +1023,8 @@ def _subcommand_adder(commands):
         bus.add_argument('--stopbits', type=int, choices=(0, 1, 2),
                          help='0 (default): 2 with no parity, 1 with parity')
         bus.add_argument('--timeout', type=float, help='seconds per transaction (default 0.5)')
-        sub.add_argument('--quiet', action='store_true', help='no progress bar')
+        sub.add_argument('--quiet', action='store_true', help='no progress bar and no notes '
+                         '(such as the pty note); warnings and errors still print')
         if device:
             chosen = sub.add_argument_group('device')
             chosen.add_argument('--device', help='device name in --config (default: the '
@@ -1049,10 +1065,15 @@ def _parameter_options(parser: argparse.ArgumentParser) -> None:
 
 
 class _StderrLog(logging.Handler):
-    """The package's log lines (a pty opened without parity) on stderr, as drive-bridge's."""
+    """
+    The package's log lines on stderr, as drive-bridge's.
 
-    def __init__(self):
-        super().__init__(logging.INFO)
+    Notes (INFO: a pty opened without parity) only without ``--quiet``; warnings and
+    errors always.
+    """
+
+    def __init__(self, quiet: bool = False):
+        super().__init__(logging.WARNING if quiet else logging.INFO)
 
     def emit(self, record: logging.LogRecord) -> None:
         """Print the record's message in one line; a warning or error says so."""
@@ -1064,7 +1085,7 @@ def main(argv: Optional[List[str]] = None, out=sys.stdout) -> int:
     """Run ``drive-bridge``; return the exit status."""
     args = build_parser().parse_args(argv)
     logger = logging.getLogger('drive_bridge')
-    handler = _StderrLog()
+    handler = _StderrLog(getattr(args, 'quiet', False))
     logger.addHandler(handler)
     level = logger.level
     logger.setLevel(logging.INFO)

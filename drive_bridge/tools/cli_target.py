@@ -119,13 +119,33 @@ def device_values(args: argparse.Namespace, from_file: Mapping[str, Any],
                               f'{", ".join(blocks) or "no device blocks"}')
         values = dict(blocks[name], **options)
     else:
-        if 'family' not in options or 'address' not in options:
-            raise ConfigError('name the device: --config FILE [--device NAME], or --family '
-                              'with --address')
-        name = f'{options["family"]}_{options["address"]}'
+        name = option_device_name(args, options)
         values = dict(options)
     check_device_options(dict(given(args, BUS_OPTIONS), **options), values, bus)
     return name, values
+
+
+def option_device_name(args: argparse.Namespace, options: Mapping[str, Any]) -> str:
+    """
+    Return the name of the device the options name: FAMILY_ADDRESS (fc_1, mcd_20).
+
+    Without ``--config`` that is the only device there is: a ``--device`` naming another
+    (a made-up ``fc_9``) is refused, naming the one there is.
+    """
+    if 'family' not in options or 'address' not in options:
+        if args.device:
+            raise CliError(f'--device {args.device}: device names come from --config FILE '
+                           '(its devices list); without it give --family and --address (the '
+                           'device is then named FAMILY_ADDRESS, e.g. fc_1)', EXIT_USAGE)
+        raise ConfigError('name the device: --config FILE [--device NAME], or --family '
+                          'with --address')
+    name = f'{options["family"]}_{options["address"]}'
+    if args.device and args.device != name:
+        raise CliError(f'--device {args.device}: without --config the only device is {name} '
+                       f'(--family {options["family"]} --address {options["address"]}); give '
+                       '--config FILE to choose a device by name, or leave --device out',
+                       EXIT_USAGE)
+    return name
 
 
 def check_device_options(options: Mapping[str, Any], values: Mapping[str, Any],

@@ -539,6 +539,87 @@ def test_node_picks_the_block_of_a_file_with_two_nodes(line, tmp_path, capsys):
     assert 'has 2 blocks and no --node was given' in error and '/line2/drive_bridge' in error
 
 
+@pytest.mark.parametrize('argv, message', [
+    (['--device', 'fc_9', *FC51], '--device fc_9: without --config the only device is fc_1 '
+     '(--family fc --address 1); give --config FILE to choose a device by name, or leave '
+     '--device out'),
+    (['--device', 'fc_9'], '--device fc_9: device names come from --config FILE (its '
+     'devices list); without it give --family and --address (the device is then named '
+     'FAMILY_ADDRESS, e.g. fc_1)'),
+    (['--device', 'fc_9', '--config', 'line.yaml'], "device 'fc_9' is not in "),
+    (['--device', 'fc_1', '--config', 'line.yaml'], "device 'fc_1' is not in "),
+])
+@pytest.mark.parametrize('command', [['status'], ['set', '3-41', '4.25']])
+def test_a_made_up_device_name_is_refused_naming_the_devices_there_are(
+        line, tmp_path, capsys, monkeypatch, command, argv, message):
+    params_file(tmp_path, line)
+    monkeypatch.chdir(tmp_path)
+    code, out = run(*command, *argv, *bus(line))
+    assert code == 2 and out == ''
+    error = one_line(capsys)
+    assert error.startswith(f'drive-bridge: {message}'), error
+    if '--config' in argv:
+        assert error.endswith('it has crusher, feeder\n'), error  # the file's order
+    assert list(line.stats.frames) == []  # nothing on the wire
+
+
+def test_a_device_named_as_the_options_name_it_is_taken(line):
+    code, out = run('status', '--device', 'fc_1', *FC51, *bus(line))
+    assert code == 0 and out.startswith('fc_1: fc fc51 at address 1\n')
+
+
+def test_status_names_the_state_and_the_trip_as_the_node_publishes_them(line):
+    code, out = run('status', *bus(line), *MCD500)
+    assert code == 0 and '  state: ready\n  status word: 0x' in out
+    assert '  trip: none\n' in out
+    line.devices[20].model.trip(1, time.monotonic())  # MCD 500 trip 1: Excess start time
+    code, out = run('status', *bus(line), *MCD500)
+    assert code == 0, out
+    assert '  state: tripped\n' in out and '  trip: Excess start time (trip code 1)\n' in out
+    for raw in ('state_code', 'trip_code_register', 'trip_code_reply'):
+        assert raw not in out, out
+    code, out = run('monitor', *bus(line), *MCD500, '--count', 1)
+    assert code == 0 and 'state: tripped  status word: 0x' in out
+    assert 'trip: Excess start time (trip code 1)' in out
+
+
+@pytest.mark.parametrize('timeout, read_as', [('5e-1', 0.5), ('5.0e-1', 0.5), ('2E0', 2.0)])
+def test_a_parameters_file_number_reads_as_rcl_reads_it(line, tmp_path, timeout, read_as):
+    # PyYAML (YAML 1.1) reads 5e-1 and 2E0 as text; rcl, so the node, reads a double.
+    path = tmp_path / 'line.yaml'
+    path.write_text(f"""/**/drive_bridge:
+  ros__parameters:
+    port: {line.pty_path}
+    parity: "N"
+    baudrate: 115200
+    timeout: {timeout}
+    devices: [feeder]
+    feeder: {{family: fc, model: fc51, address: 1}}
+""")
+    args = build_parser().parse_args(['status', '--config', str(path)])
+    assert make_bus(args)[0].link.timeout_s == read_as
+    code, out = run('status', '--config', path, '--quiet')
+    assert code == 0 and out.startswith('feeder: fc fc51 at address 1\n'), out
+
+
+def test_a_parameters_file_double_where_the_node_wants_an_integer_is_refused(
+        line, tmp_path, capsys):
+    path = tmp_path / 'line.yaml'
+    path.write_text(f"""/**/drive_bridge:
+  ros__parameters:
+    port: {line.pty_path}
+    parity: "N"
+    baudrate: 1152E2
+    devices: [feeder]
+    feeder: {{family: fc, model: fc51, address: 1}}
+""")
+    code, _ = run('status', '--config', path, '--quiet')
+    assert code == 2
+    error = one_line(capsys)
+    assert "parameter 'baudrate' = 115200.0 has the wrong type" in error, error
+    assert list(line.stats.frames) == []  # nothing on the wire
+
+
 # -- bad input, exit status, help -----------------------------------------------------------
 @pytest.mark.parametrize('argv, code, message', [
     (['get', '--family', 'fc', '--address', 1, '3-4x'], 2, "parameter number '3-4x'"),
@@ -600,12 +681,24 @@ PTY_NOTE = 'is a pty: opened without parity (a pty has no wire, so no parity); t
 def test_a_pty_takes_the_configured_parity_e_run_after_run_and_after_a_scan(line, capsys):
     # On a pty Linux takes parity E on the first open only: the next run (a status after a
     # scan) failed with "(22, 'Invalid argument')". The README's commands do that.
-    port = ['--port', line.pty_path, '--quiet']
+    port = ['--port', line.pty_path]
     for argv in (['scan', *port, '--addresses', '1-1'], ['status', *port, *FC51],
                  ['status', *port, *FC51], ['get', *port, *FC51, '3-41']):
         code, out = run(*argv)
         assert code == 0 and out, argv
         assert capsys.readouterr().err == f'drive-bridge: {line.pty_path} {PTY_NOTE}\n', argv
+
+
+def test_quiet_silences_the_pty_note_but_not_errors(line, capsys):
+    port = ['--port', line.pty_path, '--quiet']
+    for argv in (['scan', *port, '--addresses', '1-1'], ['status', *port, *FC51],
+                 ['get', *port, *FC51, '3-41']):
+        code, out = run(*argv)
+        assert code == 0 and out, argv
+        assert capsys.readouterr().err == '', argv
+    code, _ = run('status', *port, '--family', 'fc', '--address', 9)  # a silent address
+    assert code == 1
+    assert one_line(capsys).startswith('drive-bridge: fc_9: no reply from address 9 within ')
 
 
 @pytest.mark.parametrize('argv, message', [

@@ -8,6 +8,7 @@ is judged by what the simulated devices received and do, not by what the command
 import signal
 import subprocess
 import sys
+import time
 from typing import List
 
 from drive_bridge.protocol.fc_scaling import percent_to_word
@@ -236,6 +237,58 @@ def test_bad_input_exits_2_with_one_line(line, args, expected):
     result = ctl(*args)
     assert_one_line(result, 2, expected)
     assert result.stdout == ''
+
+
+def timed_ctl(*args: str) -> tuple:
+    """Run drive_bridge_ctl without --node or --namespace; return (result, seconds taken)."""
+    started = time.monotonic()
+    result = subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl', '--timeout',
+                             str(SLOW_TIMEOUT_S), *args], capture_output=True, text=True,
+                            timeout=3 * SLOW_TIMEOUT_S, stdin=subprocess.DEVNULL)
+    return result, time.monotonic() - started
+
+
+# A full name without --namespace waited --timeout for /drive_bridge, the default node, while
+# the name said /line1. With a long --timeout, a run that ends well before it did not wait.
+SLOW_TIMEOUT_S = 60.0
+
+
+def test_full_names_without_a_namespace_find_the_node_at_once(feeder):
+    started, seconds = timed_ctl('call', '/line1/feeder/start')
+    assert started.returncode == 0, started.stderr
+    assert started.stdout.startswith('success: true\n') and seconds < SLOW_TIMEOUT_S / 2
+    assert wait_for(feeder.moving)  # the simulated drive runs
+    stopped, _ = timed_ctl('call', '/line1/feeder/stop')
+    assert stopped.returncode == 0 and wait_for(feeder.stopped)
+    state, seconds = timed_ctl('state', '/line1/crusher')
+    assert state.stdout == 'ready\n' and seconds < SLOW_TIMEOUT_S / 2
+    echoed, seconds = timed_ctl('echo', '/diagnostics', '--count', '1')
+    assert "name: '/line1/drive_bridge: " in echoed.stdout and seconds < SLOW_TIMEOUT_S / 2
+
+
+@pytest.mark.parametrize('args, expected', [
+    (['call', '/line1/feeder/launch'], 'no bridge node has /line1/feeder/launch (the Trigger '
+     'services of /line1/drive_bridge: /line1/crusher/quick_stop, /line1/crusher/reset, '),
+    (['call', '/line1/drive_bridge/feeder/start'], 'no bridge node has '
+     '/line1/drive_bridge/feeder/start (the Trigger services of /line1/drive_bridge: '),
+    (['state', '/line1/nothing'], 'no bridge node has /line1/nothing/state (the state topics '
+     'of /line1/drive_bridge: /line1/crusher/state, /line1/feeder/state, /line1/watch/state)'),
+])
+def test_a_full_name_no_bridge_has_fails_at_once_naming_what_there_is(sim, line, args,
+                                                                      expected):
+    starts = DriveProbe(sim, 1).start_edges()
+    result, seconds = timed_ctl(*args)
+    assert_one_line(result, 2, expected)
+    assert result.stdout == '' and seconds < SLOW_TIMEOUT_S / 2
+    assert DriveProbe(sim, 1).start_edges() == starts  # no start reached the drive
+
+
+def test_a_service_under_the_node_name_is_answered_with_the_name_meant(line):
+    result = ctl('call', '/line1/drive_bridge/feeder/start')
+    assert_one_line(result, 2, '/line1/drive_bridge has no service '
+                    '/line1/drive_bridge/feeder/start (its Trigger services: ')
+    assert result.stderr.endswith('service names do not include the node name, did you mean '
+                                  '/line1/feeder/start?\n')
 
 
 def test_no_node_is_one_line_that_names_what_is_there(line):

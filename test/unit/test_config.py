@@ -194,6 +194,63 @@ def test_a_parameters_file_is_read_with_rcl_s_types(tmp_path, text, value):
     assert parameters['devices'] == [value]
 
 
+def read_plain(tmp_path, text):
+    """Return the value of ``timeout: text`` in a parameters file, as drive-bridge reads it."""
+    path = tmp_path / 'line.yaml'
+    path.write_text(f'/**/drive_bridge:\n  ros__parameters:\n    timeout: {text}\n')
+    return config.load_params_file(str(path))['/**/drive_bridge']['timeout']
+
+
+# rcl_yaml_param_parser (parse.c get_value, rcl 9.2 = Jazzy): a plain scalar is an int64 if
+# strtoll(text, base 0) takes all of it, else a double if strtod takes all of it without a
+# range error, else text. PyYAML (YAML 1.1) needs a dot and a signed exponent for a float.
+@pytest.mark.parametrize('text, value', [
+    ('1e-1', 0.1),  # text to PyYAML (no dot)
+    ('1.0e-1', 0.1),  # a float to both
+    ('-2E3', -2000.0),  # text to PyYAML (no dot); a double to rcl, not an integer
+    ('1.0e5', 100000.0),  # text to PyYAML (unsigned exponent)
+    ('5E+0', 5.0),
+    ('.5', 0.5),
+    ('1.', 1.0),
+    ('0x1p3', 8.0),  # strtod's hexadecimal form
+    ('9223372036854775808', 9223372036854775808.0),  # past int64: strtoll fails, strtod reads
+    ('08', 8.0),  # not octal to strtoll (base 0), a decimal to strtod
+])
+def test_a_plain_number_of_a_parameters_file_is_a_double_where_rcl_reads_one(
+        tmp_path, text, value):
+    read = read_plain(tmp_path, text)
+    assert type(read) is float and read == value
+
+
+@pytest.mark.parametrize('text, value', [
+    ('10', 10), ('-3', -3), ('+5', 5), ('0x1A', 26), ('010', 8), ('-010', -8),
+    ('9223372036854775807', 9223372036854775807),
+])
+def test_a_plain_integer_of_a_parameters_file_is_read_as_strtoll_reads_it(
+        tmp_path, text, value):
+    read = read_plain(tmp_path, text)
+    assert type(read) is int and read == value
+
+
+@pytest.mark.parametrize('text, check', [
+    ('inf', math.isinf), ('-Infinity', lambda value: value == -math.inf),
+    ('nan', math.isnan), ('.nan', math.isnan), ('-.inf', lambda value: value == -math.inf),
+])
+def test_a_plain_infinity_or_nan_is_a_double_as_to_rcl(tmp_path, text, check):
+    read = read_plain(tmp_path, text)
+    assert type(read) is float and check(read)
+
+
+@pytest.mark.parametrize('text', [
+    '1e999', '1e-400',  # strtod's range error
+    '1_000', '0b101', '1:30', '2024-01-02',  # numbers or a date to PyYAML only
+    '1e', 'e5', '0x', '"1e-1"', "'-2E3'", '!!str 5',  # not whole, quoted or tagged
+])
+def test_what_rcl_reads_as_text_is_text(tmp_path, text):
+    read = read_plain(tmp_path, text)
+    assert type(read) is str and read == text.strip('"\'').replace('!!str ', '')
+
+
 def test_other_yaml_files_keep_yaml_s_own_types(tmp_path):
     path = tmp_path / 'backup.yaml'  # a backup's text value N stays the text N
     path.write_text('value: N\nother: y\n')
