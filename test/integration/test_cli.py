@@ -583,19 +583,24 @@ def test_status_names_the_state_and_the_trip_as_the_node_publishes_them(line):
     assert 'trip: Excess start time (trip code 1)' in out
 
 
-@pytest.mark.parametrize('timeout, read_as', [('5e-1', 0.5), ('5.0e-1', 0.5), ('2E0', 2.0)])
-def test_a_parameters_file_number_reads_as_rcl_reads_it(line, tmp_path, timeout, read_as):
-    # PyYAML (YAML 1.1) reads 5e-1 and 2E0 as text; rcl, so the node, reads a double.
+def feeder_line_file(tmp_path, line, link_lines: str):
+    """Write a parameters file of one FC 51 ``feeder`` on ``line`` with ``link_lines``."""
     path = tmp_path / 'line.yaml'
     path.write_text(f"""/**/drive_bridge:
   ros__parameters:
     port: {line.pty_path}
     parity: "N"
-    baudrate: 115200
-    timeout: {timeout}
+    {link_lines}
     devices: [feeder]
     feeder: {{family: fc, model: fc51, address: 1}}
 """)
+    return path
+
+
+@pytest.mark.parametrize('timeout, read_as', [('5e-1', 0.5), ('5.0e-1', 0.5), ('2E0', 2.0)])
+def test_a_parameters_file_number_reads_as_rcl_reads_it(line, tmp_path, timeout, read_as):
+    # PyYAML (YAML 1.1) reads 5e-1 and 2E0 as text; rcl, so the node, reads a double.
+    path = feeder_line_file(tmp_path, line, f'baudrate: 115200\n    timeout: {timeout}')
     args = build_parser().parse_args(['status', '--config', str(path)])
     assert make_bus(args)[0].link.timeout_s == read_as
     code, out = run('status', '--config', path, '--quiet')
@@ -604,15 +609,7 @@ def test_a_parameters_file_number_reads_as_rcl_reads_it(line, tmp_path, timeout,
 
 def test_a_parameters_file_double_where_the_node_wants_an_integer_is_refused(
         line, tmp_path, capsys):
-    path = tmp_path / 'line.yaml'
-    path.write_text(f"""/**/drive_bridge:
-  ros__parameters:
-    port: {line.pty_path}
-    parity: "N"
-    baudrate: 1152E2
-    devices: [feeder]
-    feeder: {{family: fc, model: fc51, address: 1}}
-""")
+    path = feeder_line_file(tmp_path, line, 'baudrate: 1152E2')
     code, _ = run('status', '--config', path, '--quiet')
     assert code == 2
     error = one_line(capsys)
