@@ -112,10 +112,14 @@ class NodeProcess:
         return self.process.pid
 
     def output(self) -> str:
-        """Return what the node printed so far."""
-        self.log.flush()
-        self.log.seek(0)
-        return self.log.read()
+        """
+        Return what the node printed so far.
+
+        Through an open file of its own: a ``seek(0)`` on ``self.log``, whose file offset the
+        node's descriptors share, would make the node's next line overwrite the log's start.
+        """
+        with open(self.log.name) as log:
+            return log.read()
 
     def stop(self) -> int:
         """SIGTERM the node; return its exit code."""

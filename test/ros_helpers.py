@@ -55,10 +55,16 @@ def _default_signals() -> None:
 
 
 def node_output(process: subprocess.Popen) -> str:
-    """Return what the node printed so far."""
-    process.log.flush()
-    process.log.seek(0)
-    return process.log.read()
+    """
+    Return what the node printed so far.
+
+    Read through an open file of its own: the node writes through a duplicate of
+    ``process.log``'s descriptor, which shares its file offset, so a ``seek(0)`` on
+    ``process.log`` made the node's next line overwrite the start of the log (seen: a line
+    the test looked for lost its first characters).
+    """
+    with open(process.log.name) as log:
+        return log.read()
 
 
 def stop_node(process: subprocess.Popen, timeout_s: float = 10.0):

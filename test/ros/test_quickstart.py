@@ -19,6 +19,7 @@ from typing import Dict, List
 
 from docs_helpers import Block, blocks, DOCS, ROOT
 import pytest
+from ros_helpers import node_output
 
 PAGE = os.path.join(DOCS, 'quickstart.md')
 LINK = '/tmp/drive_bridge_line'
@@ -101,9 +102,8 @@ class QuickStart:
 
     @staticmethod
     def output(process: subprocess.Popen) -> str:
-        process.log.flush()
-        process.log.seek(0)
-        return process.log.read()
+        """Return what ``process`` printed so far (see ros_helpers.node_output)."""
+        return node_output(process)
 
     def logs(self) -> str:
         return '\n'.join(f'-- {process.args[-1]}:\n{self.output(process)}'
