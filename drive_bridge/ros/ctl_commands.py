@@ -10,8 +10,7 @@ import importlib
 import math
 from typing import Any, List, Optional
 
-from drive_bridge.ros.command_inputs import COMMANDS_NODE_SUFFIX
-from drive_bridge.ros.ctl_session import BridgeSession, Interrupted
+from drive_bridge.ros.ctl_session import Bridge, BridgeSession, Interrupted
 from drive_bridge.ros.ctl_values import BadInput, message_text, Refused, resolve
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetAvailableTransitions, GetState
@@ -58,23 +57,18 @@ def call(session: BridgeSession, service_name: str) -> int:
 
 def _triggers(session: BridgeSession):
     """Return a lister of a bridge node's Trigger services (full names)."""
-    def triggers(namespace: str, name: str) -> List[str]:
-        return [service for service, types in
-                session.node.get_service_names_and_types_by_node(name, namespace)
+    def triggers(bridge: Bridge) -> List[str]:
+        return [service for service, types in session.services(bridge).items()
                 if TRIGGER in types]
     return triggers
 
 
 def _topics(session: BridgeSession, suffix: str = '', subscribed: bool = False):
     """Return a lister of a bridge node's published (or subscribed) topics ending in suffix."""
-    def topics(namespace: str, name: str) -> List[str]:
-        if subscribed:  # the bridge's commands node takes the speed references
-            found = session.node.get_subscriber_names_and_types_by_node(
-                name + COMMANDS_NODE_SUFFIX, namespace)
-        else:
-            found = session.node.get_publisher_names_and_types_by_node(name, namespace)
-        return [topic for topic, _ in found
-                if topic.endswith(suffix) and topic not in HIDDEN_TOPICS]
+    def topics(bridge: Bridge) -> List[str]:
+        # The bridge's commands node takes the speed references.
+        found = session.subscriptions(bridge) if subscribed else session.publications(bridge)
+        return [topic for topic in found if topic.endswith(suffix) and topic not in HIDDEN_TOPICS]
     return topics
 
 

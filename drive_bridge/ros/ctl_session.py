@@ -11,7 +11,7 @@ and one that is there gets ``--timeout`` to match the command's own client or pu
 import os
 import threading
 import time
-from typing import Callable, Dict, Iterable, List, Tuple
+from typing import Callable, Dict, Iterable, List, Optional, Tuple
 
 from drive_bridge.ros.command_inputs import COMMANDS_NODE_SUFFIX
 from drive_bridge.ros.ctl_values import BadInput, BRIDGE_NODE, Refused
@@ -21,6 +21,7 @@ from rclpy.task import Future
 
 GRACE_S = 2.0
 SPIN_STEP_S = 0.05
+Bridge = Tuple[str, str]  # a bridge node: (namespace, name)
 
 
 class Interrupted(Exception):
@@ -77,18 +78,18 @@ class BridgeSession:
             'namespace?'
         return BadInput(f'no node {self.full_name} within {self.timeout_s:g} s ({hint})')
 
-    def bridges(self) -> List[Tuple[str, str]]:
+    def bridges(self) -> List[Bridge]:
         """Return (namespace, name) of every bridge node in the graph, sorted."""
         return sorted((space, name) for name, space in
                       self.node.get_node_names_and_namespaces() if name == BRIDGE_NODE)
 
-    def take_owner_of(self, full_name: str, names: Callable[[str, str], Iterable[str]],
+    def take_owner_of(self, full_name: str, names: Callable[[Bridge], Iterable[str]],
                       what: str) -> None:
         """
         Make the bridge node that has ``full_name`` the session's node, if none was chosen.
 
         Without ``--node`` or ``--namespace``, a full name (``/line1/feeder/start``) says
-        which bridge node is meant: ``names(namespace, name)`` lists what a bridge node has
+        which bridge node is meant: ``names((namespace, name))`` lists what a bridge node has
         (its services, say). Bridge nodes are waited for as :meth:`find_node` waits; if none
         of them has ``full_name`` GRACE_S after the first appeared, the default node's own
         check follows when it is there, else BadInput names what they have (``what``).
@@ -97,13 +98,13 @@ class BridgeSession:
             return
         first_seen: List[float] = []
 
-        def owner() -> List[Tuple[str, str]]:
+        def owner() -> List[Bridge]:
             bridges = self.bridges()
             if bridges and not first_seen:
                 first_seen.append(time.monotonic())
             if not self._seen_at and (self.namespace, self.name) in bridges:
                 self._seen_at = time.monotonic()  # the default node: find_node's wait is over
-            return [bridge for bridge in bridges if full_name in self._listed(names, *bridge)]
+            return [bridge for bridge in bridges if full_name in names(bridge)]
 
         def settled() -> bool:
             return bool(owner()) or bool(first_seen) and \
@@ -120,16 +121,9 @@ class BridgeSession:
             raise self._no_node()
         if self._seen_at:
             return  # the default node is there: its own check names what it has
-        offered = [f'{_full(*bridge)}: {self.listing(sorted(self._listed(names, *bridge)))}'
+        offered = [f'{_full(*bridge)}: {self.listing(sorted(names(bridge)))}'
                    for bridge in self.bridges()]
         raise BadInput(f'no bridge node has {full_name} ({what} of {"; ".join(offered)})')
-
-    def _listed(self, names: Callable[[str, str], Iterable[str]], space: str,
-                name: str) -> List[str]:
-        try:
-            return list(names(space, name))
-        except NodeNameNonExistentError:
-            return []
 
     def _node_present(self) -> bool:
         return (self.name, self.namespace) in self.node.get_node_names_and_namespaces()
@@ -153,27 +147,30 @@ class BridgeSession:
         return future.result()
 
     # -- the bridge node's graph ---------------------------------------------------------
-    def services(self) -> Dict[str, List[str]]:
+    # ``bridge``: (namespace, name) of a bridge node; the session's node if not given.
+    def services(self, bridge: Optional[Bridge] = None) -> Dict[str, List[str]]:
         """Return service -> types of the bridge node ({} if it is gone)."""
-        return self._query(self.node.get_service_names_and_types_by_node)
+        return self._query(self.node.get_service_names_and_types_by_node, bridge)
 
-    def publications(self) -> Dict[str, List[str]]:
+    def publications(self, bridge: Optional[Bridge] = None) -> Dict[str, List[str]]:
         """Return topic -> types the bridge node publishes."""
-        return self._query(self.node.get_publisher_names_and_types_by_node)
+        return self._query(self.node.get_publisher_names_and_types_by_node, bridge)
 
-    def subscriptions(self) -> Dict[str, List[str]]:
+    def subscriptions(self, bridge: Optional[Bridge] = None) -> Dict[str, List[str]]:
         """Return topic -> types the bridge's commands node subscribes to (speed references)."""
+        space, name = bridge or (self.namespace, self.name)
         return self._query(self.node.get_subscriber_names_and_types_by_node,
-                           self.commands_name)
+                           (space, name + COMMANDS_NODE_SUFFIX))
 
     @property
     def commands_name(self) -> str:
         """Return the name of the bridge's commands node (its command subscriptions)."""
         return self.name + COMMANDS_NODE_SUFFIX
 
-    def _query(self, query, name: str = '') -> Dict[str, List[str]]:
+    def _query(self, query, bridge: Optional[Bridge]) -> Dict[str, List[str]]:
+        space, name = bridge or (self.namespace, self.name)
         try:
-            return dict(query(name or self.name, self.namespace))
+            return dict(query(name, space))
         except NodeNameNonExistentError:
             return {}
 
