@@ -72,11 +72,11 @@ class QuickStart:
             process.log = log
             self.background.append(process)
             deadline = time.monotonic() + START_S
-            while ready not in self.output(process):
-                assert process.poll() is None, f'{command} ended:\n{self.output(process)}'
-                assert time.monotonic() < deadline, f'{command}:\n{self.output(process)}'
+            while ready not in node_output(process):
+                assert process.poll() is None, f'{command} ended:\n{node_output(process)}'
+                assert time.monotonic() < deadline, f'{command}:\n{node_output(process)}'
                 time.sleep(0.05)
-            self.expect(command, expected, self.output(process))
+            self.expect(command, expected, node_output(process))
 
     def run(self, block: Block) -> None:
         for command, expected in block.commands():
@@ -100,13 +100,8 @@ class QuickStart:
             assert normalized(self.here(wanted)) in normalized(printed), \
                 f'{command}\n  printed:\n{printed}\n  page: {wanted}\n{self.logs()}'
 
-    @staticmethod
-    def output(process: subprocess.Popen) -> str:
-        """Return what ``process`` printed so far (see ros_helpers.node_output)."""
-        return node_output(process)
-
     def logs(self) -> str:
-        return '\n'.join(f'-- {process.args[-1]}:\n{self.output(process)}'
+        return '\n'.join(f'-- {process.args[-1]}:\n{node_output(process)}'
                          for process in self.background)
 
     def stop(self) -> Dict[str, int]:
