@@ -67,6 +67,25 @@ def pytest_configure(config):
     pymodbus_use.register(config)
 
 
+def pytest_runtest_setup(item):
+    """
+    Fail a test of an ``xdist_group`` whose mark has no effect.
+
+    With ``--dist loadgroup`` a worker appends each test's group to its id, and the tests of a
+    group then run on one worker (the babbling lines one after another; a module's node
+    started once). pytest 9.2 ignores that id (pytest-xdist issue 1386): the groups were
+    silently spread over the workers.
+    """
+    config = item.config
+    if not hasattr(config, 'workerinput') or not config.getvalue('loadgroup'):
+        return
+    mark = item.get_closest_marker('xdist_group')
+    if mark is not None and not item.nodeid.endswith(f'@{mark.args[0]}'):
+        pytest.fail(f'xdist_group has no effect with pytest {pytest.__version__} (pytest-xdist '
+                    'issue 1386): this test is not in its group; use requirements-test.txt',
+                    pytrace=False)
+
+
 def pytest_unconfigure(config):
     lock = getattr(config, 'ros_domain_lock', None)
     if lock is not None:
