@@ -17,6 +17,10 @@ import pytest
 from ros_helpers import running_node, serving
 from safety_helpers import DriveProbe, is_run_word, McdProbe, wait_for, write_frames
 
+# One worker runs this module's tests: its node, a module fixture, then starts once, not
+# once on every worker that takes one of them.
+pytestmark = pytest.mark.xdist_group('ctl')
+
 NAMESPACE = '/line1'
 DEVICES = {
     'feeder': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 20.0,

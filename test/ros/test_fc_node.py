@@ -7,6 +7,10 @@ from drive_bridge.sim.devices import make_sim_server
 import pytest
 from ros_helpers import running_node, serving
 
+# One worker runs this module's tests: its node, a module fixture, then starts once, not
+# once on every worker that takes one of them.
+pytestmark = pytest.mark.xdist_group('fc_node')
+
 DEVICES = {
     'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 20.0,
              'speed_reference': 40.0, 'comms_timeout': 2.0, 'comms_timeout_function': 2},

@@ -19,6 +19,10 @@ from rclpy.serialization import serialize_message
 from ros_helpers import node_output, running_node, serving
 from sensor_msgs.msg import JointState
 
+# One worker runs this module's tests: its node, a module fixture, then starts once, not
+# once on every worker that takes one of them.
+pytestmark = pytest.mark.xdist_group('joints_node')
+
 SCALE = 20.0  # rad/s at 100 %: 10 rad/s = 50 % = 0x2000
 WHEELS = ('left_wheel_joint', 'right_wheel_joint')
 DEVICES = {

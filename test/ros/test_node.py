@@ -9,6 +9,10 @@ import rclpy
 from ros_helpers import (
     node_output, RosClient, running_node, serving, start_node, stop_node, write_params)
 
+# One worker runs this module's tests: its node, a module fixture, then starts once, not
+# once on every worker that takes one of them.
+pytestmark = pytest.mark.xdist_group('node')
+
 DEVICES = {
     'main': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 10.0},
     'watch': {'family': 'mcd', 'model': 'auto', 'address': 21, 'poll_rate': 10.0,

@@ -32,6 +32,10 @@ from rosbags.interfaces import QosDurability, QosReliability
 from rosbags.rosbag2 import Reader
 import yaml
 
+# One worker runs this module's tests: its node, a module fixture, then starts once, not
+# once on every worker that takes one of them.
+pytestmark = pytest.mark.xdist_group('recording')
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 NAMESPACE = '/line1'
 CONFIGURED_PCT = 20.0  # the feeder's speed_reference parameter; the topic sends REFERENCE_PCT
