@@ -174,6 +174,11 @@ class DeviceConfig:
         """Return whether the device takes a speed reference (FC-profile drives)."""
         return self.entry.reference
 
+    @property
+    def is_joint(self) -> bool:
+        """Return whether the device is a ros2_control joint (a drive with a velocity_scale)."""
+        return self.is_drive and bool(self.option('velocity_scale'))
+
     def option(self, name: str, default: Any = None) -> Any:
         """Return a family or reference setting by name."""
         return self.options.get(name, default)

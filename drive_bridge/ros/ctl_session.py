@@ -13,8 +13,8 @@ import threading
 import time
 from typing import Callable, Dict, Iterable, List, Optional, Tuple
 
-from drive_bridge.ros.command_inputs import COMMANDS_NODE_SUFFIX
 from drive_bridge.ros.ctl_values import BadInput, BRIDGE_NODE, Refused
+from drive_bridge.ros.naming import COMMANDS_NODE_SUFFIX
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.task import Future

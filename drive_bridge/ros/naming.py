@@ -1,5 +1,7 @@
 """Names the node gives things, without rclpy (tools and tests use them too)."""
 
+COMMANDS_NODE_SUFFIX = '_commands'  # the node of the high-rate command topics
+
 
 def status_name(node_fqn: str, device: str) -> str:
     """

@@ -26,7 +26,7 @@ from typing import Dict, List, Optional, Tuple, TYPE_CHECKING
 from drive_bridge.bag_metadata import encode_references, REFERENCE_AT_START
 from drive_bridge.errors import RecordingError
 from drive_bridge.extras import MissingDependency, require
-from drive_bridge.ros.command_inputs import COMMANDS_NODE_SUFFIX
+from drive_bridge.ros.naming import COMMANDS_NODE_SUFFIX
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameters
 import rclpy

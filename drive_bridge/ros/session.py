@@ -17,14 +17,16 @@ nothing of the bus while holding it.
 
 from contextlib import contextmanager
 import threading
-from typing import Dict, Iterator, List, Optional
+from typing import Dict, Iterator, List, Optional, TYPE_CHECKING
 
 from drive_bridge import config as cfg
 from drive_bridge.bus.events import BusEvent
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.ros import joints
 from drive_bridge.ros.device_interface import CommandPaths, DeviceInterface
 from rclpy.lifecycle import LifecycleNode
+
+if TYPE_CHECKING:
+    from drive_bridge.ros import joints
 
 STOP_ALL_TIMEOUT_S = 3.0
 
@@ -43,7 +45,7 @@ class BusSession:
         self._logger = node.get_logger()
         self._lock = threading.Lock()
         self._devices: Dict[str, DeviceInterface] = {}
-        self.joints: Optional[joints.JointInterface] = None
+        self.joints: Optional['joints.JointInterface'] = None
         self.bus = BusMaster(config.make_transport(),
                              [device.make_spec() for device in config.devices],
                              config.timing, listener=self._on_bus_event)
@@ -55,12 +57,16 @@ class BusSession:
             interface = DeviceInterface(node, self.bus.snapshot(device.name), paths)
             with self._lock:
                 self._devices[device.name] = interface
+        if not any(device.is_joint for device in self.config.devices):
+            return
+        # Imported by nodes with joints only: sensor_msgs brings numpy, 0.1 s of CPU a start.
+        from drive_bridge.ros import joints
         with self._lock:
             self.joints = joints.attach(node, self.bus, self.config.devices,
                                         paths.gate.is_active, paths.inputs)
 
     @property
-    def joint_bridge(self) -> Optional[joints.JointBridge]:
+    def joint_bridge(self) -> Optional['joints.JointBridge']:
         """Return the joints' bridge, or None without joints."""
         interface = self.joints
         return interface.bridge if interface is not None else None

@@ -24,7 +24,7 @@ def joint_specs(devices: Sequence[cfg.DeviceConfig]) -> List[JointSpec]:
     return [JointSpec(device.name, cfg.joint_name_of(device), device.option('velocity_scale'),
                       device.option('command_mode', 'reference'),
                       device.option('auto_stop_delay', 1.0))
-            for device in devices if device.is_drive and device.option('velocity_scale')]
+            for device in devices if device.is_joint]
 
 
 class Integrator:
