@@ -112,8 +112,9 @@ def lean_node(name: str) -> 'rclpy.node.Node':
     """
     Return a test node without the services no test calls on it.
 
-    No parameter services, no type description service, no /rosout: 8 services fewer for
-    the node under test and the client to discover and for each spin to wait on.
+    No parameter services, no type description service, no /rosout publisher: seven services
+    and a publisher fewer for the node under test and the client to discover, and for each
+    spin to wait on.
     """
     return rclpy.create_node(name, start_parameter_services=False, enable_rosout=False,
                              parameter_overrides=[Parameter('start_type_description_service',
