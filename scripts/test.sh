@@ -32,19 +32,18 @@ busy_cores() {
     idle = (a[5] - b[5]) + (a[6] - b[6])
     printf "%.2f", (total > 0 ? (total - idle) / total * cores : 0) }'
 }
-# Workers per tier. The wire-bound tiers take two workers: with three, the pymodbus engine's
-# test_bus missed its 0.3 s reply timeouts in one quiet run of five, with four in one of
-# three. The ROS tier takes four where the machine is free and three where other work keeps
-# half a core or more busy when the run starts (a CI machine shared with other jobs): beside
-# a CPU hog four ROS workers starved a test's simulator past its 1 s reply timeout
-# (docs/contributing.md).
+# Workers per tier (docs/contributing.md says why). Where the machine is free, the wire-bound
+# tiers take four workers and the ROS tier four. Where other work keeps half a core or more
+# busy when the run starts (a CI machine shared with other jobs), they take two and three:
+# beside a CPU hog four integration workers missed 0.25 s bounds, and four ROS workers starved
+# a test's simulator past its 1 s reply timeout.
 busy=$(busy_cores)
 if awk -v busy="$busy" 'BEGIN { exit !(busy >= 0.5) }'; then
   load_note="other work keeps $busy cores busy: fewer workers"
   default_wire_workers=2 default_ros_workers=3
 else
   load_note="the machine is free ($busy cores busy)"
-  default_wire_workers=2 default_ros_workers=4
+  default_wire_workers=4 default_ros_workers=4
 fi
 unit_workers=${UNIT_WORKERS:-2}
 integration_workers=${INTEGRATION_WORKERS:-$default_wire_workers}
