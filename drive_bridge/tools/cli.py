@@ -46,8 +46,8 @@ from drive_bridge.protocol.requests import ReadCoils, ReadRegisters
 from drive_bridge.protocol.words import coils_to_words
 from drive_bridge.tools import backup_file, parameter_info as info
 from drive_bridge.tools.cli_target import (
-    bus_values, CliError, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, file_block,
-    make_bus, restore_command)
+    bus_values, CliError, EXIT_BROKEN_PIPE, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
+    file_block, make_bus, restore_command)
 from drive_bridge.transport.protocols import PROTOCOLS
 
 SCAN_FAMILIES = ('fc', 'mcd')  # asked in this order; then the VLT option card (see scan)
@@ -1112,6 +1112,23 @@ def run_command(args: argparse.Namespace, out) -> int:
     except KeyboardInterrupt:
         print('drive-bridge: interrupted', file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # The reader went away (`drive-bridge monitor ... | head -3`): the command has ended
+        # and closed its port on the way out. No traceback, now or when Python flushes
+        # stdout at exit (Python's note on SIGPIPE).
+        _drop_stdout()
+        return EXIT_BROKEN_PIPE
+
+
+def _drop_stdout() -> None:
+    """Point stdout at /dev/null, so that nothing more is written to a closed pipe."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # no descriptor behind sys.stdout
+        pass
+    finally:
+        os.close(devnull)
 
 
 if __name__ == '__main__':

@@ -1052,6 +1052,23 @@ def test_a_second_opener_gets_one_line_naming_the_owner_and_ctrl_c_exits_130(lin
     assert run('status', *bus(line), *FC51)[0] == 0  # free again
 
 
+def test_a_reader_that_goes_away_ends_monitor_quietly_and_frees_the_port(line):
+    """`drive-bridge monitor ... | head -1`: exit 141 as SIGPIPE would, no traceback."""
+    monitor = cli_process('monitor', *bus(line), *FC51, '--period', 0.05,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert 'state: ready' in monitor.stdout.readline()
+        monitor.stdout.close()  # as head does after its line
+        assert monitor.wait(timeout=10) == 141
+        error = monitor.stderr.read()
+        assert 'Traceback' not in error and 'Exception' not in error, error
+    finally:
+        if monitor.poll() is None:
+            monitor.kill()
+            monitor.wait()
+    assert run('status', *bus(line), *FC51)[0] == 0  # the port was closed
+
+
 def test_progress_goes_to_stderr_only_on_a_terminal(line, tmp_path):
     path = tmp_path / 'b.yaml'
     argv = ['backup', '--port', line.pty_path, '--parity', 'N', '--baudrate', 115200, *FC51,
