@@ -16,8 +16,9 @@ sys.path.insert(0, os.path.dirname(__file__))  # test helpers (integration_helpe
 TIERS = ('unit', 'integration', 'ros')
 # The longest tests first (--durations, 2-core machine), so that pytest-xdist's workers do not
 # end with one of them while the others idle. Only the order changes: a test or module left
-# out runs after these, in collection order. A module whose tests share a module-scoped node
-# is named as a whole, so that its node starts once per worker.
+# out runs after these, in collection order. With --dist loadgroup, xdist hands out the
+# groups (xdist_group) first, the most tests first, and then the other tests in this order:
+# the entries below for grouped modules order them only in runs without groups.
 LONGEST_FIRST = (
     'test/ros/test_soak_node.py',  # 37 s
     'test/ros/test_safety_signals.py::test_sigterm_exits_cleanly_under_load',  # 31 s
@@ -79,8 +80,11 @@ def pytest_runtest_setup(item):
     config = item.config
     if not hasattr(config, 'workerinput') or not config.getvalue('loadgroup'):
         return
-    mark = item.get_closest_marker('xdist_group')
-    if mark is not None and not item.nodeid.endswith(f'@{mark.args[0]}'):
+    # The suffix as pytest-xdist 3.8 makes it (xdist/remote.py): every group mark, by its
+    # first argument or name=, sorted and joined.
+    groups = sorted({str(mark.args[0] if mark.args else mark.kwargs.get('name', 'default'))
+                     for mark in item.iter_markers('xdist_group')})
+    if groups and not item.nodeid.endswith('@' + '_'.join(groups)):
         pytest.fail(f'xdist_group has no effect with pytest {pytest.__version__} (pytest-xdist '
                     'issue 1386): this test is not in its group; use requirements-test.txt',
                     pytrace=False)

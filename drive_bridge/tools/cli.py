@@ -17,7 +17,7 @@ nothing is written to a device that does not answer as the family and model give
 a silent address). ``restore`` checks the whole file (device, family, model, every number,
 type, limit and option) before it writes anything. Progress goes to stderr, and only while
 stderr is a terminal. Exit status: 0 done, 1 the bus or device failed, 2 a bad argument
-or file, 130 interrupted (Ctrl-C).
+or file, 130 interrupted (Ctrl-C), 141 the reader of stdout went away (``| head``).
 """
 
 import argparse
@@ -882,7 +882,8 @@ Modbus gateway, without ROS. The bus and the device come from the node's paramet
 (--config FILE --device NAME) or from options (--port, --family, --address).
 
 Exit status: 0 done, 1 the bus or the device failed, 2 a bad argument or file,
-130 interrupted (Ctrl-C). Progress is drawn on stderr only when it is a terminal."""
+130 interrupted (Ctrl-C), 141 the reader of stdout went away (| head). Progress is drawn on
+stderr only when it is a terminal."""
 
 EXAMPLES = {
     'scan': 'drive-bridge scan --port /dev/ttyUSB0 --addresses 1-32',
@@ -1099,7 +1100,9 @@ def main(argv: Optional[List[str]] = None, out=sys.stdout) -> int:
 def run_command(args: argparse.Namespace, out) -> int:
     """Run the command ``args`` names; return the exit status, with failures in one line."""
     try:
-        return args.function(args, out)
+        status = args.function(args, out)
+        out.flush()  # a reader that went away shows here, not when Python exits
+        return status
     except CliError as error:
         print(f'drive-bridge: {error}', file=sys.stderr)
         return error.code
@@ -1114,8 +1117,8 @@ def run_command(args: argparse.Namespace, out) -> int:
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         # The reader went away (`drive-bridge monitor ... | head -3`): the command has ended
-        # and closed its port on the way out. No traceback, now or when Python flushes
-        # stdout at exit (Python's note on SIGPIPE).
+        # (a write it made is done: each prints after its transaction). No traceback, now or
+        # when Python flushes stdout at exit (Python's note on SIGPIPE).
         _drop_stdout()
         return EXIT_BROKEN_PIPE
 

@@ -1052,7 +1052,7 @@ def test_a_second_opener_gets_one_line_naming_the_owner_and_ctrl_c_exits_130(lin
     assert run('status', *bus(line), *FC51)[0] == 0  # free again
 
 
-def test_a_reader_that_goes_away_ends_monitor_quietly_and_frees_the_port(line):
+def test_a_reader_that_goes_away_ends_monitor_quietly(line):
     """`drive-bridge monitor ... | head -1`: exit 141 as SIGPIPE would, no traceback."""
     monitor = cli_process('monitor', *bus(line), *FC51, '--period', 0.05,
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -1066,7 +1066,21 @@ def test_a_reader_that_goes_away_ends_monitor_quietly_and_frees_the_port(line):
         if monitor.poll() is None:
             monitor.kill()
             monitor.wait()
-    assert run('status', *bus(line), *FC51)[0] == 0  # the port was closed
+
+
+def test_a_reader_gone_before_the_output_is_written_gives_141_without_a_traceback(line):
+    """`drive-bridge status ... | true`: the output is flushed before Python's exit."""
+    reader, writer = os.pipe()
+    os.close(reader)  # gone before anything is written
+    as_a_user = {k: v for k, v in os.environ.items() if k != 'PYTHONUNBUFFERED'}  # buffered
+    try:
+        status = cli_process('status', *bus(line), *FC51, stdout=writer,
+                             stderr=subprocess.PIPE, text=True, env=as_a_user)
+    finally:
+        os.close(writer)
+    _, error = status.communicate(timeout=30)
+    assert status.returncode == 141, error
+    assert 'Traceback' not in error and 'Exception' not in error, error
 
 
 def test_progress_goes_to_stderr_only_on_a_terminal(line, tmp_path):

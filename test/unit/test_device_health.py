@@ -1,4 +1,4 @@
-"""When a device is next due: a poll rate is never exceeded, however late the polls begin."""
+"""When a device is due after a poll (schedule_next): its rate holds however late polls begin."""
 
 from drive_bridge.bus.device import DeviceHealth
 from hypothesis import given, strategies as st

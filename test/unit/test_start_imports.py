@@ -5,6 +5,8 @@ import sys
 
 import pytest
 
+pytest.importorskip('rclpy', reason='ROS 2 (rclpy) from PyPI')
+
 
 @pytest.mark.parametrize('module', ['drive_bridge.ros.process', 'drive_bridge.ros.ctl',
                                     'drive_bridge.ros.record'])
