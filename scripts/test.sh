@@ -33,8 +33,8 @@ busy_cores() {
     printf "%.2f", (total > 0 ? (total - idle) / total * cores : 0) }'
 }
 # Workers per tier (docs/contributing.md says why). The wire-bound tiers take two workers:
-# with three or four, tests with 0.2-0.5 s reply timeouts missed them in about one quiet run
-# in eight (a 591-parameter restore, scans, fault counts). The ROS tier takes four where the
+# with three or four, tests with 0.2-0.5 s reply timeouts missed them in one quiet run of
+# five to eight (a 591-parameter restore, scans, fault counts). The ROS tier takes four where the
 # machine is free and three where other work keeps half a core or more busy when the run
 # starts (a CI machine shared with other jobs): beside a CPU hog four ROS workers starved a
 # test's simulator past its 1 s reply timeout. The load is sampled once, at the start.
