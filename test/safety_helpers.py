@@ -143,6 +143,16 @@ class DriveProbe(MotorProbe):
         with self.server.lock:
             return list(self.model.control_words_received)
 
+    def forget(self) -> None:
+        """
+        Forget the words received so far: the counts below start from the next one.
+
+        The simulator keeps the latest 1000 (50 s at 20 Hz), so counts taken a minute apart on
+        a long-lived simulator compare two different windows; compare from here instead.
+        """
+        with self.server.lock:
+            self.model.control_words_received.clear()
+
     def start_edges(self) -> int:
         return rising_edges(is_run_word(word) for word in self.words())
 
