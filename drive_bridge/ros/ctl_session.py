@@ -158,19 +158,19 @@ class BridgeSession:
 
     def subscriptions(self, bridge: Optional[Bridge] = None) -> Dict[str, List[str]]:
         """Return topic -> types the bridge's commands node subscribes to (speed references)."""
-        space, name = bridge or (self.namespace, self.name)
-        return self._query(self.node.get_subscriber_names_and_types_by_node,
-                           (space, name + COMMANDS_NODE_SUFFIX))
+        return self._query(self.node.get_subscriber_names_and_types_by_node, bridge,
+                           COMMANDS_NODE_SUFFIX)
 
     @property
     def commands_name(self) -> str:
         """Return the name of the bridge's commands node (its command subscriptions)."""
         return self.name + COMMANDS_NODE_SUFFIX
 
-    def _query(self, query, bridge: Optional[Bridge]) -> Dict[str, List[str]]:
+    def _query(self, query, bridge: Optional[Bridge], suffix: str = '') -> Dict[str, List[str]]:
+        """Ask ``query`` about ``bridge`` (the session's node if None), its name + ``suffix``."""
         space, name = bridge or (self.namespace, self.name)
         try:
-            return dict(query(name, space))
+            return dict(query(name + suffix, space))
         except NodeNameNonExistentError:
             return {}
 
