@@ -113,6 +113,7 @@ def test_bus_with_two_starters_and_a_dead_address(line):
         bus.shutdown(stop_motors=False)
 
 
+@pytest.mark.realtime  # a reading within 0.25 s of its reply: the threads must run on time
 def test_a_dead_address_does_not_hold_back_the_readings_of_a_live_starter(line):
     # The bus gives its listener each reading while a request is on the wire: on AP ASCII
     # with the address fragment, so also while a dead address's ACK is awaited (0.5 s each).
