@@ -55,8 +55,19 @@ class TappedSerialClient(ModbusSerialClient):
         return super().send(*args, **kwargs)
 
     def recv(self, size):
-        """Read as pymodbus asks, keeping a copy."""
-        data = super().recv(size)
+        """
+        Read as pymodbus asks, keeping a copy; return nothing once the timeout passed silent.
+
+        pymodbus (3.6) waits up to the timeout for a reply's first bytes and then reads them
+        with the port's own timeout, so a silent address cost twice the timeout (0.6 s at
+        0.3 s). Here the read follows the first wait only when that wait saw bytes.
+        """
+        if self.socket is not None and size is not None and size > self._waiting():
+            if not self._wait_for_data() and not self._waiting():
+                return b''  # nothing within the timeout: pymodbus reports no response
+            data = self.socket.read(size)
+        else:
+            data = super().recv(size)
         if self._in_transaction and data:
             self.received += data
         return data

@@ -48,6 +48,24 @@ def test_read_status_block_and_write_command(pty_transport, sim_bus):
     assert list(sim_bus.devices[20].model.commands_received) == [1]
 
 
+@pytest.mark.realtime  # a bound on the time a silent address holds the line
+@pytest.mark.parametrize('engine', marked_params(SERIAL_ENGINES))
+def test_a_silent_address_holds_the_line_for_one_timeout(sim_bus, engine):
+    # pymodbus 3.6 waited out the timeout for a reply's first bytes and then read them with
+    # the port's own timeout: a silent address held the line for twice the timeout.
+    transport = transport_for(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=1.0),
+                              engine)
+    try:
+        started = time.monotonic()
+        with pytest.raises(NoResponse, match='no reply within 1 s'):
+            transport.execute(22, ReadRegisters(2, 1))
+        held_s = time.monotonic() - started
+        assert transport.execute(20, ReadRegisters(2, 1))  # the line works on
+    finally:
+        transport.close()
+    assert 0.95 < held_s < 1.6, held_s
+
+
 @pytest.mark.parametrize('transaction, code', [
     (ReadRegisters(2, 7), 5), (ReadRegisters(1, 1), 3), (WriteRegister(1, 9), 6),
     (WriteRegister(3, 1), 4), (ReadRegisters(8 + 591, 1), 7)])
