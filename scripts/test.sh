@@ -32,22 +32,24 @@ busy_cores() {
     idle = (a[5] - b[5]) + (a[6] - b[6])
     printf "%.2f", (total > 0 ? (total - idle) / total * cores : 0) }'
 }
-# Workers per tier (docs/contributing.md says why). The wire-bound tiers take two workers:
-# with three or four, tests with 0.2-0.5 s reply timeouts missed them in one quiet run of
-# five to eight (a 591-parameter restore, scans, fault counts). The ROS tier takes four where
-# the machine is free and three where other work keeps half a core or more busy when the run
-# starts (a CI machine shared with other jobs): beside a CPU hog four ROS workers starved a
-# test's simulator past its 1 s reply timeout. The load is sampled once, at the start.
+# Workers per tier (docs/contributing.md says why). Where the machine is free, the wire-bound
+# tiers take three workers and the ROS tier four; where other work keeps half a core or more
+# busy when the run starts (a CI machine shared with other jobs), two and three: beside a CPU
+# hog, four ROS workers starved a test's simulator past its 1 s reply timeout; the wire-bound
+# tiers were tried with more than two only on a free machine. The load is sampled once, at
+# the start.
 busy=$(busy_cores)
 if awk -v busy="$busy" 'BEGIN { exit !(busy >= 0.5) }'; then
   load_note="other work keeps $busy cores busy: fewer workers"
+  default_wire_workers=2
   default_ros_workers=3
 else
   load_note="the machine is free ($busy cores busy)"
+  default_wire_workers=3
   default_ros_workers=4
 fi
 unit_workers=${UNIT_WORKERS:-2}
-integration_workers=${INTEGRATION_WORKERS:-2}
+integration_workers=${INTEGRATION_WORKERS:-$default_wire_workers}
 realtime_workers=${REALTIME_WORKERS:-3}
 ros_workers=${ROS_WORKERS:-$default_ros_workers}
 echo "== workers: integration $integration_workers, realtime $realtime_workers," \
