@@ -8,7 +8,8 @@ device is never written to, an inactive node refuses commands, the node checks e
 ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE and the other ROS settings come from the
 environment, as for any ROS process. Exit status: 0 done; 1 the node refused or failed, or
 did not answer in time; 2 bad input, or no such node, service, device or parameter (one
-line on stderr, nothing sent); 130 interrupted.
+line on stderr, nothing sent); 130 interrupted; 141 the reader of the output went away
+(``drive_bridge_ctl echo ... | head -1``), as SIGPIPE would end it, without a traceback.
 """
 
 import argparse
@@ -19,6 +20,7 @@ import sys
 import threading
 from typing import List, Optional
 
+from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE
 from drive_bridge.ros import ctl_commands as commands
 from drive_bridge.ros.ctl_params import ParameterCommands
 from drive_bridge.ros.ctl_session import BridgeSession, Interrupted
@@ -188,6 +190,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'{PROG}: interrupted' + (f': {interrupted}' if str(interrupted) else ''),
               file=sys.stderr, flush=True)
         return 130
+    except BrokenPipeError:  # the reader went away; each print follows an act or precedes one
+        drop_stdout()
+        return EXIT_BROKEN_PIPE
     finally:
         session.close()
         node.destroy_node()

@@ -33,6 +33,7 @@ from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence, Tu
 from drive_bridge import config as cfg
 from drive_bridge.bus.device import BusDevice
 from drive_bridge.bus.runner import retryable, run_poll, TransactionRunner
+from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceReading, ParameterAccess, ParameterOptions
 from drive_bridge.devices.drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
@@ -46,7 +47,7 @@ from drive_bridge.protocol.requests import ReadCoils, ReadRegisters
 from drive_bridge.protocol.words import coils_to_words
 from drive_bridge.tools import backup_file, parameter_info as info
 from drive_bridge.tools.cli_target import (
-    bus_values, CliError, EXIT_BROKEN_PIPE, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
+    bus_values, CliError, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
     file_block, make_bus, restore_command)
 from drive_bridge.transport.protocols import PROTOCOLS
 
@@ -1117,21 +1118,9 @@ def run_command(args: argparse.Namespace, out) -> int:
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         # The reader went away (`drive-bridge monitor ... | head -3`): the command has ended
-        # (a write it made is done: each prints after its transaction). No traceback, now or
-        # when Python flushes stdout at exit (Python's note on SIGPIPE).
-        _drop_stdout()
+        # (a write it made is done: each prints after its transaction).
+        drop_stdout()
         return EXIT_BROKEN_PIPE
-
-
-def _drop_stdout() -> None:
-    """Point stdout at /dev/null, so that nothing more is written to a closed pipe."""
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError):  # no descriptor behind sys.stdout
-        pass
-    finally:
-        os.close(devnull)
 
 
 if __name__ == '__main__':

@@ -18,7 +18,6 @@ from drive_bridge.settings import check_value
 from drive_bridge.transport.protocols import PROTOCOLS
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
-EXIT_BROKEN_PIPE = 141  # the reader of stdout went away: as a program SIGPIPE ended
 BUS_OPTIONS = ('protocol', 'port', 'host', 'tcp_port', 'baudrate', 'parity', 'stopbits',
                'timeout')
 DEVICE_OPTIONS = ('family', 'model', 'address')

@@ -190,6 +190,24 @@ def test_state_and_echo(line):
     assert 'hardware_id: mcd mcd500 address 20' in diagnostics
 
 
+def test_a_reader_that_goes_away_ends_echo_quietly(line):
+    """`drive_bridge_ctl echo ... | head -2`: exit 141 as SIGPIPE would, no traceback."""
+    echo = subprocess.Popen(
+        [sys.executable, '-m', 'drive_bridge.ros.ctl', '--namespace', NAMESPACE, 'echo',
+         'crusher/motor_current'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdin=subprocess.DEVNULL)
+    try:
+        assert echo.stdout.readline() == 'data: 0.0\n'
+        echo.stdout.close()  # as head does after its lines
+        assert echo.wait(timeout=30) == 141
+        error = echo.stderr.read()
+        assert 'Traceback' not in error and 'Exception' not in error, error
+    finally:
+        if echo.poll() is None:
+            echo.kill()
+            echo.wait()
+
+
 def test_lifecycle_by_label(feeder):
     assert ctl('lifecycle', 'get').stdout == 'active\n'
     assert ctl('lifecycle', 'list').stdout == 'deactivate\nshutdown\n'
