@@ -1,7 +1,7 @@
 """
 What the package's terminal commands share: their exit when the reader of their output goes.
 
-``drive-bridge monitor ... | head -3`` or ``drive_bridge_ctl echo ... | head -1``: once the
+``drive-bridge monitor ... | head -3`` or ``drive_bridge_ctl echo ... | head -2``: once the
 reader has gone, the next write raises ``BrokenPipeError``. The command then ends as SIGPIPE
 would end a C program, with :data:`EXIT_BROKEN_PIPE` and nothing on stderr, and points its
 stdout at /dev/null first, so that Python's flush at exit raises nothing either (Python's note

@@ -5,7 +5,8 @@
 #   lane 1 (normal priority): the tests with deadlines, one tier after another
 #     integration tier            pytest in .venv (pymodbus 3.16), pytest-xdist workers
 #     integration tier: realtime  the tests whose threads must run within milliseconds
-#     pymodbus 3.6.9              the tests marked pymodbus, in .venv-pymodbus369
+#                                 (those marked pymodbus also in .venv-pymodbus369)
+#     pymodbus 3.6.9              the other tests marked pymodbus, in .venv-pymodbus369
 #     ROS tier                    pytest in .venv, pytest-xdist workers
 #   lane 2 (computes, no deadlines; in the idle scheduling class, so lane 1 keeps its times):
 #     docs                        scripts/docs.sh (Sphinx, every warning an error)
@@ -136,12 +137,24 @@ echo "pymodbus $("$VENV/bin/python" -c 'import pymodbus; print(pymodbus.__versio
 lane_wire() {
   step 'integration tier' pytest_in "$VENV" -n "$integration_workers" --dist loadgroup \
     -m 'not realtime' test/integration "$@"
-  # Tests whose threads must run within milliseconds: no CPU-bound workers beside them (lane
-  # 2 runs only on idle CPU time). They wait on the clock, so a few of them share the machine.
-  step 'integration tier: realtime tests' pytest_in "$VENV" -n "$realtime_workers" \
-    --dist loadgroup -m realtime test/integration "$@"
+  step 'integration tier: realtime tests' realtime_tests "$@"
   step 'pymodbus 3.6.9: marked tests' pytest_in "$VENV369" -n "$integration_workers" \
-    --dist loadgroup -m pymodbus test/unit test/integration "$@"
+    --dist loadgroup -m 'pymodbus and not realtime' test/unit test/integration "$@"
+}
+# Tests whose threads must run within milliseconds: no CPU-bound workers beside them (lane 2
+# runs only on idle CPU time). They wait on the clock, so a few of them share the machine: the
+# realtime workers, and beside them one process that runs the ones marked pymodbus again with
+# pymodbus 3.6.9 (three tests, about 15 s), one after another.
+realtime_tests() {
+  local log369="$workspace/realtime369.log" pid369 status
+  pytest_in "$VENV369" -m 'pymodbus and realtime' test/integration "$@" > "$log369" 2>&1 &
+  pid369=$!
+  pytest_in "$VENV" -n "$realtime_workers" --dist loadgroup -m realtime test/integration "$@"
+  status=$?
+  wait "$pid369" || status=1
+  echo '-- the same marked pymodbus, with pymodbus 3.6.9:'
+  cat "$log369"
+  return $status
 }
 
 # Lane 2: the docs and the colcon workspace (build, installed commands, unit tier, linters).

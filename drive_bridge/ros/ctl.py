@@ -190,7 +190,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'{PROG}: interrupted' + (f': {interrupted}' if str(interrupted) else ''),
               file=sys.stderr, flush=True)
         return 130
-    except BrokenPipeError:  # the reader went away; each print follows an act or precedes one
+    except BrokenPipeError:
+        # The reader went away. A result prints after its act; `reference --rate` announces
+        # its stream after the first message and sends no more once the announcement fails.
         drop_stdout()
         return EXIT_BROKEN_PIPE
     finally:

@@ -9,11 +9,12 @@ for the one asked for (stale values), and a late reply of another unit makes it 
 reply asked for (a write the device executed is answered as failed).
 
 :class:`TappedSerialClient` keeps every byte pymodbus read in a transaction, and what is still
-waiting after it, without changing what pymodbus reads. :func:`settle` then looks at them with
-the project's own RTU codec: when whole valid frames came back to back, the last reply of the
-unit to the request's function is the newest (devices answer in order) and is taken;
-otherwise pymodbus's outcome stands. On a clean line one frame and nothing after it was read:
-nothing waits and pymodbus's outcome is returned as it is.
+waiting after it; it changes what pymodbus reads only where pymodbus 3.6 would wait out the
+timeout a second time for a reply that has not begun (see its ``recv``). :func:`settle` then
+looks at them with the project's own RTU codec: when whole valid frames came back to back,
+the last reply of the unit to the request's function is the newest (devices answer in order)
+and is taken; otherwise pymodbus's outcome stands. On a clean line one frame and nothing
+after it was read: nothing waits and pymodbus's outcome is returned as it is.
 """
 
 import time
@@ -58,9 +59,10 @@ class TappedSerialClient(ModbusSerialClient):
         """
         Read as pymodbus asks, keeping a copy; return nothing once the timeout passed silent.
 
-        pymodbus (3.6) waits up to the timeout for a reply's first bytes and then reads them
-        with the port's own timeout, so a silent address cost twice the timeout (0.6 s at
-        0.3 s). Here the read follows the first wait only when that wait saw bytes.
+        pymodbus 3.6 asks for a size, waits up to the timeout for a reply's first bytes and
+        then reads them with the port's own timeout, so a silent address cost twice the
+        timeout (0.6 s at 0.3 s). Here the read follows the first wait only when that wait
+        saw bytes. pymodbus 3.16 asks for no size (``None``) and reads as it did.
         """
         if self.socket is not None and size is not None and size > self._waiting():
             if not self._wait_for_data() and not self._waiting():

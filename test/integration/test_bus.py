@@ -31,10 +31,12 @@ def start_bus(sim_bus, timeout_s, with_dead_device=True):
 @pytest.fixture
 def bus(sim_bus):
     """
-    Yield a bus that waits 1 s for a reply: these tests check what it does, not how fast.
+    Yield a bus of two starters that waits 1 s for a reply.
 
-    The simulator answers from a thread of the test's own process, which waits out the
-    process's garbage collections and its share of a busy machine's cores.
+    These tests check what the bus does, not how fast, and a dead device would cost each of
+    them a 1 s probe now and then. The simulator answers from a thread of the test's own
+    process, which waits out the process's garbage collections and its share of a busy
+    machine's cores.
     """
     master = start_bus(sim_bus, timeout_s=1.0, with_dead_device=False)
     yield master

@@ -941,10 +941,10 @@ def header_command(path) -> list:
 
 
 def test_the_backup_header_gives_the_whole_restore_command_and_it_restores(line, tmp_path):
-    path = backup(line, tmp_path, ['--timeout', 0.3, *FC51])
+    path = backup(line, tmp_path, ['--timeout', 2, *FC51])  # not the default (0.5 s)
     command = header_command(path)
     assert command == ['restore', '--port', line.pty_path, '--baudrate', '115200', '--parity',
-                       'N', '--timeout', '0.3', '--family', 'fc', '--model', 'fc51',
+                       'N', '--timeout', '2', '--family', 'fc', '--model', 'fc51',
                        '--address', '1', str(path)]
     model(line, 1).parameters[341] = 999
     code, out = run(*command)
