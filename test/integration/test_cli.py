@@ -25,6 +25,7 @@ from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from drive_bridge.tools.cli import build_parser, main, Session
 from drive_bridge.tools.cli_target import make_bus
+from integration_helpers import first_line_then_reader_gone
 import pytest
 import yaml
 
@@ -1062,16 +1063,10 @@ def test_a_reader_that_goes_away_ends_monitor_quietly(line):
     """`drive-bridge monitor ... | head -1`: exit 141 as SIGPIPE would, no traceback."""
     monitor = cli_process('monitor', *bus(line), *FC51, '--period', 0.05,
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        assert 'state: ready' in monitor.stdout.readline()
-        monitor.stdout.close()  # as head does after its line
-        assert monitor.wait(timeout=10) == 141
-        error = monitor.stderr.read()
-        assert 'Traceback' not in error and 'Exception' not in error, error
-    finally:
-        if monitor.poll() is None:
-            monitor.kill()
-            monitor.wait()
+    ended = first_line_then_reader_gone(monitor, timeout_s=10)
+    assert 'state: ready' in ended.first_line
+    assert ended.status == 141, ended
+    assert 'Traceback' not in ended.stderr and 'Exception' not in ended.stderr, ended.stderr
 
 
 def test_a_reader_gone_before_the_output_is_written_gives_141_without_a_traceback(line):

@@ -13,6 +13,7 @@ from typing import List
 
 from drive_bridge.protocol.fc_scaling import percent_to_word
 from drive_bridge.sim.devices import make_sim_server
+from integration_helpers import first_line_then_reader_gone
 import pytest
 from ros_helpers import running_node, serving
 from safety_helpers import DriveProbe, is_run_word, McdProbe, wait_for, write_frames
@@ -191,21 +192,15 @@ def test_state_and_echo(line):
 
 
 def test_a_reader_that_goes_away_ends_echo_quietly(line):
-    """`drive_bridge_ctl echo ... | head -2`: exit 141 as SIGPIPE would, no traceback."""
+    """`drive_bridge_ctl echo ... | head -1`: exit 141 as SIGPIPE would, no traceback."""
     echo = subprocess.Popen(
         [sys.executable, '-m', 'drive_bridge.ros.ctl', '--namespace', NAMESPACE, 'echo',
          'crusher/motor_current'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         stdin=subprocess.DEVNULL)
-    try:
-        assert echo.stdout.readline() == 'data: 0.0\n'
-        echo.stdout.close()  # as head does after its lines
-        assert echo.wait(timeout=30) == 141
-        error = echo.stderr.read()
-        assert 'Traceback' not in error and 'Exception' not in error, error
-    finally:
-        if echo.poll() is None:
-            echo.kill()
-            echo.wait()
+    ended = first_line_then_reader_gone(echo, timeout_s=30)
+    assert ended.first_line == 'data: 0.0\n'
+    assert ended.status == 141, ended
+    assert 'Traceback' not in ended.stderr and 'Exception' not in ended.stderr, ended.stderr
 
 
 def test_lifecycle_by_label(feeder):
