@@ -9,7 +9,8 @@ of one core with each thread's wake-ups a second, and the bus thread's wake-ups 
 transaction. By default no subscriber is matched during the window (the node then skips its
 volatile topics); with ``--listen`` a child process subscribes to every topic of every
 device and to ``/diagnostics`` during the window, as a bag recorder or Foxglove would, and
-the messages it received are printed; with ``--calls N`` another child process calls N
+the messages it received are printed (``--listen status_word``: only the topics named, of
+every device); with ``--calls N`` another child process calls N
 ``std_srvs/Trigger`` services a second (``stop`` of each MCD 500 in turn, which are
 stopped: each call is one write on the bus and an answer), and the calls answered are
 printed. The wire fraction achieved is the transactions on the wire per second (whole
@@ -17,7 +18,7 @@ request and reply, by the pacer's frame log) over the wire limit of the same mix
 (request, reply and two 3.5-character gaps each). ``--runs`` repeats the measurement with
 a new node and line each time. The machine and its load are printed first and last.
 Run: .venv/bin/python bench/node_cpu.py [window seconds] [baud rate, default 19200]
-[--listen] [--calls 4] [--runs 3]
+[--listen [TOPIC,...]] [--calls 4] [--runs 3]
 """
 
 import argparse
@@ -69,7 +70,14 @@ def wait_until_ready(names) -> None:
 
 
 def listen(names: List[str]) -> None:
-    """Subscribe to every topic of ``names`` and /diagnostics until SIGTERM; print the count."""
+    """
+    Subscribe to ``names``' topics until SIGTERM; print the count.
+
+    ``names``: the topics, comma-separated (``all``: every topic of each device and
+    /diagnostics), then the device names.
+    """
+    topics, names = names[0].split(','), names[1:]
+    every = topics == ['all']
     signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
     rclpy.init()
     node = rclpy.create_node(f'bench_listener_{os.getpid()}')
@@ -79,8 +87,10 @@ def listen(names: List[str]) -> None:
         received[0] += 1
     for name in names:
         for topic, kind in DEVICE_TOPICS.items():
-            node.create_subscription(kind, f'{name}/{topic}', count, 10)
-    node.create_subscription(DiagnosticArray, '/diagnostics', count, 10)
+            if every or topic in topics:
+                node.create_subscription(kind, f'{name}/{topic}', count, 10)
+    if every:
+        node.create_subscription(DiagnosticArray, '/diagnostics', count, 10)
     print('listening', flush=True)
     spin_until_shutdown(node)
     print(f'received {received[0]}', flush=True)
@@ -136,7 +146,7 @@ def stop_child(child: subprocess.Popen) -> str:
     return output.strip()
 
 
-def measure(window_s: float, baudrate: int, listen: bool, calls_hz: float,
+def measure(window_s: float, baudrate: int, listen: List[str], calls_hz: float,
             source: str = '') -> Dict:
     """Run the node (from ``source``: see NodeProcess) on a fresh line for one window."""
     timing = LineTiming(baudrate, 'E', 1)
@@ -147,8 +157,8 @@ def measure(window_s: float, baudrate: int, listen: bool, calls_hz: float,
     try:
         wait_until_ready(list(LINE_DEVICES))
         if listen:
-            children['listener'] = start_child('--listener-child', *LINE_DEVICES,
-                                               ready='listening')
+            children['listener'] = start_child('--listener-child', ','.join(listen),
+                                               *LINE_DEVICES, ready='listening')
         if calls_hz:
             mcds = [name for name, block in LINE_DEVICES.items() if block['family'] == 'mcd']
             children['caller'] = start_child('--caller-child', str(calls_hz), *mcds,
@@ -198,8 +208,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('window_s', nargs='?', type=float, default=10.0)
     parser.add_argument('baudrate', nargs='?', type=int, default=BAUDRATE)
-    parser.add_argument('--listen', action='store_true',
-                        help='subscribe to every topic during the window (a child process)')
+    parser.add_argument('--listen', nargs='?', const='all', default='',
+                        metavar='TOPIC,...',
+                        help='subscribe during the window (a child process) to every topic '
+                        'of every device and /diagnostics, or to the device topics named '
+                        '(e.g. status_word)')
     parser.add_argument('--calls', type=float, default=0.0,
                         help='Trigger calls a second during the window (a child process)')
     parser.add_argument('--runs', type=int, default=1, help='measurements, each afresh')
@@ -219,16 +232,20 @@ def main() -> None:
     window_s, baudrate = arguments.window_s, arguments.baudrate
     print(f'drive_bridge_node, 4 MCD 500 + 4 FC 51 at 100 Hz, {baudrate} baud 8E1 timing '
           f'through the wire pacer, ' +
-          ('every topic subscribed' if arguments.listen else 'no subscriber') +
+          (listening(arguments.listen)) +
           (f', {arguments.calls:g} Trigger calls/s' if arguments.calls else '') +
           f'; {conditions()}')
+    listen_to = arguments.listen.split(',') if arguments.listen else []
+    unknown = set(listen_to) - set(DEVICE_TOPICS) - {'all'}
+    if unknown:
+        parser.error(f'--listen: no such device topic: {", ".join(sorted(unknown))}')
     rclpy.init()
     compared = versions(arguments.compare)
     results: Dict[str, List[Dict]] = {label: [] for label, _ in compared}
     try:
         for index in range(arguments.runs):
             for label, source in compared:
-                results[label].append(measure(window_s, baudrate, arguments.listen,
+                results[label].append(measure(window_s, baudrate, listen_to,
                                               arguments.calls, source))
                 print_run(results[label][-1], index, label)
     finally:
@@ -236,6 +253,15 @@ def main() -> None:
     for label, runs in results.items():
         print_summary(label, runs)
     print(thread_cpu.load())
+
+
+def listening(listen: str) -> str:
+    """Return what the listener subscribes to, in words."""
+    if not listen:
+        return 'no subscriber'
+    if listen == 'all':
+        return 'every topic subscribed'
+    return f'{listen} of every device subscribed'
 
 
 def print_summary(label: str, runs: List[Dict]) -> None:

@@ -103,6 +103,23 @@ finish() {
   rm -rf "$workspace"
 }
 trap finish EXIT
+# Ctrl-C or a TERM: stop everything this run started. Without job control the background
+# processes (lane 2, the realtime step's pymodbus 3.6.9 run) ignore SIGINT, and would go on
+# after the run has ended and its workspace is gone.
+descendants() {  # descendants PID: every process below PID, parents before their children
+  local child
+  for child in $(pgrep -P "$1"); do
+    echo "$child"
+    descendants "$child"
+  done
+}
+interrupted() {
+  trap - INT TERM
+  echo "== interrupted: stopping what the run started"
+  kill -TERM $(descendants $$) 2> /dev/null
+  exit 130
+}
+trap interrupted INT TERM
 
 VENV="$root/.venv"
 VENV369="$root/.venv-pymodbus369"

@@ -6,7 +6,8 @@ from sources that know nothing of it: each device's status from its bus snapshot
 (:func:`drive_bridge.ros.diagnostics.diagnostic_status`), then the runtime change of its
 ``allow_control`` (:class:`drive_bridge.ros.parameters.RuntimeSettings`) and its joint
 values, then one status for ``~/joint_commands`` (:mod:`drive_bridge.ros.joints`). While no
-bus is open (unconfigured, or closing) the array is empty. Executor thread only.
+bus is open (unconfigured, or closing) the array is empty; while no subscription is matched
+to ``/diagnostics`` nothing is built. Executor thread only.
 """
 
 from dataclasses import dataclass
@@ -68,8 +69,16 @@ class DiagnosticsPublisher:
         self._publisher = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
 
     def publish(self, sources: Optional[DiagnosticSources]) -> None:
-        """Publish the array of ``sources`` (None: no bus, an empty array); never raise."""
+        """
+        Publish the array of ``sources`` (None: no bus, an empty array); never raise.
+
+        Only while a subscription is matched (an aggregator, ``ros2 topic echo``, a bag):
+        the topic is volatile, so an array nobody receives is lost anyway, and building it
+        (some 50 values a device) is most of what the node's executor does in a second.
+        """
         try:
+            if self._publisher.get_subscription_count() == 0:
+                return
             self._publisher.publish(self.array(sources))
         except Exception as error:  # noqa: B902 - a bug must not kill the node
             self._node.get_logger().error(f'cannot publish diagnostics: '

@@ -79,3 +79,35 @@ def test_activation_publishes_again_what_the_bus_told_last():
     device.republish()  # a state without a reading: never the reading before it
     assert sent(node)['feeder/state'][-2:] == ['offline', 'offline']
     assert sent(node)['feeder/trip'] == ['', '']
+
+
+class DiagnosticsNode:
+    """What DiagnosticsPublisher needs of the node: a publisher and a clock it counts."""
+
+    def __init__(self):
+        self.publisher = None
+        self.clock_reads = 0
+
+    def create_publisher(self, msg_type, topic, qos):
+        assert topic == '/diagnostics'
+        self.publisher = FakePublisher(msg_type)
+        self.publisher.publish = self.publisher.sent.append
+        return self.publisher
+
+    def get_clock(self):
+        self.clock_reads += 1
+        from rclpy.clock import Clock
+        return Clock()
+
+
+def test_diagnostics_nobody_listens_to_are_not_even_built():
+    node_diagnostics = pytest.importorskip('drive_bridge.ros.node_diagnostics')
+    node = DiagnosticsNode()
+    diagnostics = node_diagnostics.DiagnosticsPublisher(node)
+    diagnostics.publish(None)
+    assert node.publisher.sent == [] and node.clock_reads == 0  # no array was put together
+    node.publisher.subscriptions = 1  # an aggregator, ros2 topic echo /diagnostics, a bag
+    diagnostics.publish(None)
+    assert len(node.publisher.sent) == 1 and node.clock_reads == 1
+    assert node.publisher.sent[0].status == []  # no bus: an empty array, stamped
+    assert node.publisher.sent[0].header.stamp.sec > 0
