@@ -7,10 +7,10 @@ window the node's CPU is read per thread from the scheduler's own accounting
 (``/proc/<pid>/task/<tid>/schedstat`` and ``sched``, see ``thread_cpu.py``), printed as %
 of one core with each thread's wake-ups a second, and the bus thread's wake-ups and CPU per
 transaction. By default no subscriber is matched during the window (the node then skips its
-volatile topics); with ``--listen`` a child process subscribes to every topic of every
-device and to ``/diagnostics`` during the window, as a bag recorder or Foxglove would, and
-the messages it received are printed (``--listen status_word``: only the topics named, of
-every device); with ``--calls N`` another child process calls N
+volatile topics and ``/diagnostics``); with ``--listen`` a child process subscribes to
+every topic of every device and to ``/diagnostics`` during the window, as a bag recorder or
+Foxglove would, and the messages it received are printed (``--listen status_word``: only
+the topics named, of every device); with ``--calls N`` another child process calls N
 ``std_srvs/Trigger`` services a second (``stop`` of each MCD 500 in turn, which are
 stopped: each call is one write on the bus and an answer), and the calls answered are
 printed. The wire fraction achieved is the transactions on the wire per second (whole
@@ -69,14 +69,14 @@ def wait_until_ready(names) -> None:
     node.destroy_node()
 
 
-def listen(names: List[str]) -> None:
+def listen(arguments: List[str]) -> None:
     """
-    Subscribe to ``names``' topics until SIGTERM; print the count.
+    Subscribe to the devices' topics until SIGTERM; print the count.
 
-    ``names``: the topics, comma-separated (``all``: every topic of each device and
+    ``arguments``: the topics, comma-separated (``all``: every topic of each device and
     /diagnostics), then the device names.
     """
-    topics, names = names[0].split(','), names[1:]
+    topics, names = arguments[0].split(','), arguments[1:]
     every = topics == ['all']
     signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
     rclpy.init()
@@ -208,11 +208,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('window_s', nargs='?', type=float, default=10.0)
     parser.add_argument('baudrate', nargs='?', type=int, default=BAUDRATE)
-    parser.add_argument('--listen', nargs='?', const='all', default='',
-                        metavar='TOPIC,...',
+    parser.add_argument('--listen', nargs='?', type=listened_topics, const=['all'],
+                        default=[], metavar='TOPIC,...',
                         help='subscribe during the window (a child process) to every topic '
                         'of every device and /diagnostics, or to the device topics named '
-                        '(e.g. status_word)')
+                        '(e.g. status_word); give the positional arguments before it')
     parser.add_argument('--calls', type=float, default=0.0,
                         help='Trigger calls a second during the window (a child process)')
     parser.add_argument('--runs', type=int, default=1, help='measurements, each afresh')
@@ -232,13 +232,10 @@ def main() -> None:
     window_s, baudrate = arguments.window_s, arguments.baudrate
     print(f'drive_bridge_node, 4 MCD 500 + 4 FC 51 at 100 Hz, {baudrate} baud 8E1 timing '
           f'through the wire pacer, ' +
-          (listening(arguments.listen)) +
+          listening(arguments.listen) +
           (f', {arguments.calls:g} Trigger calls/s' if arguments.calls else '') +
           f'; {conditions()}')
-    listen_to = arguments.listen.split(',') if arguments.listen else []
-    unknown = set(listen_to) - set(DEVICE_TOPICS) - {'all'}
-    if unknown:
-        parser.error(f'--listen: no such device topic: {", ".join(sorted(unknown))}')
+    listen_to = arguments.listen
     rclpy.init()
     compared = versions(arguments.compare)
     results: Dict[str, List[Dict]] = {label: [] for label, _ in compared}
@@ -255,13 +252,26 @@ def main() -> None:
     print(thread_cpu.load())
 
 
-def listening(listen: str) -> str:
+def listened_topics(text: str) -> List[str]:
+    """Return ``--listen``'s topics (``['all']``: every one); raise on a name that is none."""
+    topics = text.split(',')
+    if topics == ['all']:
+        return topics
+    unknown = sorted(set(topics) - set(DEVICE_TOPICS))
+    if unknown:
+        raise argparse.ArgumentTypeError(
+            f'no such device topic: {", ".join(unknown)} (the topics: '
+            f'{", ".join(DEVICE_TOPICS)}; or all, alone)')
+    return topics
+
+
+def listening(listen: List[str]) -> str:
     """Return what the listener subscribes to, in words."""
     if not listen:
         return 'no subscriber'
-    if listen == 'all':
+    if listen == ['all']:
         return 'every topic subscribed'
-    return f'{listen} of every device subscribed'
+    return f'{",".join(listen)} of every device subscribed'
 
 
 def print_summary(label: str, runs: List[Dict]) -> None:

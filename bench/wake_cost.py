@@ -7,7 +7,8 @@ does. This bench times a bare loop of waits with nothing else to do, in the thre
 clock (``time.thread_time``): ``threading.Event.wait`` (how the bus thread waits for the
 gap, so a command can wake it), ``time.sleep`` (the rest of the gap), and the two one after
 the other (the bus thread's pair). The waits are 1.5 ms and 0.3 ms, as at 19200 baud. Each
-case runs ``rounds`` times in turn; the median and range are printed, in µs a wait.
+case runs ``rounds`` times in turn; the median and range are printed, in µs a wait (for
+the pair, a pair).
 Run: .venv/bin/python bench/wake_cost.py [waits per round, default 1500] [rounds, default 3]
 """
 
@@ -48,8 +49,8 @@ def main() -> None:
             results[name].append(cost_us(wait, count))
     for name, values in results.items():
         values.sort()
-        print(f'{name}: {statistics.median(values):.1f} µs of CPU '
-              f'[{values[0]:.1f}, {values[-1]:.1f}] over {count} waits, {rounds} rounds')
+        print(f'{name}: {statistics.median(values):.1f} µs of CPU a time '
+              f'[{values[0]:.1f}, {values[-1]:.1f}], {count} times a round, {rounds} rounds')
     print(thread_cpu.load())
 
 

@@ -82,7 +82,8 @@ step() {
     status=$?
     children_cpu_s "$cpu_file"
     exit $status
-  )
+  ) &
+  wait $!
   status=$?
   cpu_s=$(cat "$cpu_file")
   local mark=''
@@ -103,23 +104,39 @@ finish() {
   rm -rf "$workspace"
 }
 trap finish EXIT
-# Ctrl-C or a TERM: stop everything this run started. Without job control the background
-# processes (lane 2, the realtime step's pymodbus 3.6.9 run) ignore SIGINT, and would go on
-# after the run has ended and its workspace is gone.
-descendants() {  # descendants PID: every process below PID, parents before their children
-  local child
-  for child in $(pgrep -P "$1"); do
-    echo "$child"
-    descendants "$child"
+# Ctrl-C or a TERM: stop everything this run started, at once (each step runs in the
+# background and is waited for, and a trapped signal ends the wait). Without job control the
+# background processes (lane 2, the realtime step's pymodbus 3.6.9 run) ignore SIGINT, and
+# would go on after the run has ended and its workspace is gone.
+found=()
+collect() {  # collect PID: add every process below PID to found (Linux /proc; no forks)
+  local file child children
+  for file in /proc/"$1"/task/*/children; do
+    children=()
+    read -r -a children < "$file" 2> /dev/null
+    for child in "${children[@]}"; do
+      found+=("$child")
+      collect "$child"
+    done
   done
 }
-interrupted() {
-  trap - INT TERM
+interrupted() {  # interrupted STATUS: stop what the run started, then exit with STATUS
+  trap '' INT TERM
   echo "== interrupted: stopping what the run started"
-  kill -TERM $(descendants $$) 2> /dev/null
-  exit 130
+  found=()
+  collect $$
+  [ ${#found[@]} -eq 0 ] || kill -TERM "${found[@]}" 2> /dev/null
+  local tries
+  for tries in $(seq 50); do  # up to 5 s for them to end before the workspace goes
+    found=()
+    collect $$
+    [ ${#found[@]} -eq 0 ] && break
+    sleep 0.1
+  done
+  exit "$1"
 }
-trap interrupted INT TERM
+trap 'interrupted 130' INT
+trap 'interrupted 143' TERM
 
 VENV="$root/.venv"
 VENV369="$root/.venv-pymodbus369"

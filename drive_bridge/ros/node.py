@@ -2,10 +2,11 @@
 The ROS 2 node ``drive_bridge``: one bus, several devices, the contract's topics and services.
 
 A managed (lifecycle) node: *configure* validates the parameters, opens the bus and starts
-reading (``/diagnostics`` is published from then on); *activate* enables the device topics,
-the commands and the speed references; *deactivate* stops every motor that may run because
-of this node and refuses commands again (a stop is still taken while a motor may run);
-*cleanup* closes the port. With ``autostart`` (default) the node walks itself to active, so
+reading (``/diagnostics`` is published from then on, while a subscription listens);
+*activate* enables the device topics, the commands and the speed references; *deactivate*
+stops every motor that may run because of this node and refuses commands again (a stop is
+still taken while a motor may run); *cleanup* closes the port. With ``autostart`` (default)
+the node walks itself to active, so
 ``drive_bridge_node`` just works.
 
 Bus I/O never runs in a ROS callback, and no callback waits for the bus while holding the

@@ -74,7 +74,8 @@ class DiagnosticsPublisher:
 
         Only while a subscription is matched (an aggregator, ``ros2 topic echo``, a bag):
         the topic is volatile, so an array nobody receives is lost anyway, and building it
-        (some 50 values a device) is most of what the node's executor does in a second.
+        (some 50 values a device) was about a quarter of the executor's CPU with 8 devices
+        and 4 service calls a second (cProfile).
         """
         try:
             if self._publisher.get_subscription_count() == 0:

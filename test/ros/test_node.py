@@ -1,13 +1,18 @@
 """The node in a subprocess against the simulator, driven through rclpy clients."""
 
-from diagnostic_msgs.msg import DiagnosticStatus
+import os
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from drive_bridge.sim.mcd_device import make_mcd_server
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 import rclpy
 from ros_helpers import (
-    node_output, RosClient, running_node, serving, start_node, stop_node, write_params)
+    LATCHED, lean_node, node_output, RosClient, running_node, serving, start_node, stop_node,
+    write_params)
+from std_msgs.msg import String
 
 # One worker runs this module's tests: its node, a module fixture, then starts once, not
 # once on every worker that takes one of them.
@@ -177,6 +182,39 @@ def assert_one_line_config_error(process, expected: str) -> None:
     lines = [line for line in stderr.splitlines() if 'configuration error' in line]
     assert len(lines) == 1 and expected in lines[0], stderr
     assert 'Traceback' not in stderr, stderr
+
+
+def spin_until(node, predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not predicate() and time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    return bool(predicate())
+
+
+def test_diagnostics_nobody_listened_to_begin_when_a_subscription_comes(tmp_path):
+    # The node builds /diagnostics only while a subscription is matched: one that comes
+    # later gets arrays from then on, each device in them.
+    with serving(make_mcd_server({20: 'mcd500'})) as server:
+        params = write_params(tmp_path / 'quiet.yaml',
+                              {'port': server.pty_path, 'parity': 'N',
+                               'diagnostics_period': 0.5},
+                              {'solo': {'family': 'mcd', 'address': 20, 'poll_rate': 10.0}})
+        process = start_node(params, namespace='/line3')
+        watcher = lean_node(f'test_watcher_{os.getpid()}')
+        try:
+            states, arrays = [], []
+            watcher.create_subscription(String, '/line3/solo/state',
+                                        lambda message: states.append(message.data), LATCHED)
+            assert spin_until(watcher, lambda: states[-1:] == ['ready'], 15.0), \
+                node_output(process)
+            watcher.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, 10)
+            # Discovery, then at most one period (0.5 s) to the next array.
+            assert spin_until(watcher, lambda: len(arrays) >= 2, 10.0), node_output(process)
+            assert [status.name for status in arrays[-1].status] == \
+                ['/line3/drive_bridge: solo']
+        finally:
+            watcher.destroy_node()
+            stop_node(process)
 
 
 def test_sigterm_stops_the_motor_this_node_started(tmp_path):
