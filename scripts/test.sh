@@ -113,7 +113,7 @@ collect() {  # collect PID: add every process below PID to found (Linux /proc; n
   local file child children
   for file in /proc/"$1"/task/*/children; do
     children=()
-    read -r -a children < "$file" 2> /dev/null
+    { read -r -a children < "$file"; } 2> /dev/null
     for child in "${children[@]}"; do
       found+=("$child")
       collect "$child"
@@ -126,11 +126,15 @@ interrupted() {  # interrupted STATUS: stop what the run started, then exit with
   found=()
   collect $$
   [ ${#found[@]} -eq 0 ] || kill -TERM "${found[@]}" 2> /dev/null
-  local tries
-  for tries in $(seq 50); do  # up to 5 s for them to end before the workspace goes
-    found=()
-    collect $$
-    [ ${#found[@]} -eq 0 ] && break
+  # Up to 5 s for them to end before the workspace goes: by their pids, as those whose
+  # parent ended first are no longer below this shell.
+  local pid tries left
+  for tries in $(seq 50); do
+    left=0
+    for pid in "${found[@]}"; do
+      [ -d "/proc/$pid" ] && left=1 && break
+    done
+    [ "$left" = 0 ] && break
     sleep 0.1
   done
   exit "$1"

@@ -193,28 +193,34 @@ def spin_until(node, predicate, timeout_s: float) -> bool:
 
 def test_diagnostics_nobody_listened_to_begin_when_a_subscription_comes(tmp_path):
     # The node builds /diagnostics only while a subscription is matched: one that comes
-    # later gets arrays from then on, each device in them.
-    with serving(make_mcd_server({20: 'mcd500'})) as server:
-        params = write_params(tmp_path / 'quiet.yaml',
-                              {'port': server.pty_path, 'parity': 'N',
-                               'diagnostics_period': 0.5},
-                              {'solo': {'family': 'mcd', 'address': 20, 'poll_rate': 10.0}})
-        process = start_node(params, namespace='/line3')
-        watcher = lean_node(f'test_watcher_{os.getpid()}')
-        try:
-            states, arrays = [], []
-            watcher.create_subscription(String, '/line3/solo/state',
-                                        lambda message: states.append(message.data), LATCHED)
-            assert spin_until(watcher, lambda: states[-1:] == ['ready'], 15.0), \
-                node_output(process)
-            watcher.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, 10)
-            # Discovery, then at most one period (0.5 s) to the next array.
-            assert spin_until(watcher, lambda: len(arrays) >= 2, 10.0), node_output(process)
-            assert [status.name for status in arrays[-1].status] == \
-                ['/line3/drive_bridge: solo']
-        finally:
-            watcher.destroy_node()
-            stop_node(process)
+    # later gets arrays from then on, each device in them. The topic is remapped: this
+    # module's other node publishes /diagnostics to its own client meanwhile.
+    topic = '/line3/diagnostics'
+    watcher = lean_node(f'test_watcher_{os.getpid()}')
+    try:
+        with serving(make_mcd_server({20: 'mcd500'})) as server:
+            params = write_params(tmp_path / 'quiet.yaml',
+                                  {'port': server.pty_path, 'parity': 'N',
+                                   'diagnostics_period': 0.5},
+                                  {'solo': {'family': 'mcd', 'address': 20, 'poll_rate': 10.0}})
+            process = start_node(params, namespace='/line3', remaps=[f'/diagnostics:={topic}'])
+            try:
+                states, arrays = [], []
+                watcher.create_subscription(String, '/line3/solo/state',
+                                            lambda message: states.append(message.data), LATCHED)
+                assert spin_until(watcher, lambda: states[-1:] == ['ready']
+                                  and watcher.count_publishers(topic) == 1, 15.0), \
+                    node_output(process)
+                assert watcher.count_subscribers(topic) == 0  # nobody has listened so far
+                watcher.create_subscription(DiagnosticArray, topic, arrays.append, 10)
+                # Discovery, then at most one period (0.5 s) to the next array.
+                assert spin_until(watcher, lambda: len(arrays) >= 2, 10.0), node_output(process)
+                assert {tuple(status.name for status in array.status) for array in arrays} == \
+                    {('/line3/drive_bridge: solo',)}
+            finally:
+                stop_node(process)
+    finally:
+        watcher.destroy_node()
 
 
 def test_sigterm_stops_the_motor_this_node_started(tmp_path):
