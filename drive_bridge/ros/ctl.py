@@ -10,6 +10,9 @@ environment, as for any ROS process. Exit status: 0 done; 1 the node refused or 
 did not answer in time; 2 bad input, or no such node, service, device or parameter (one
 line on stderr, nothing sent); 130 interrupted; 141 the reader of the output went away
 (``drive_bridge_ctl echo ... | head -1``), as SIGPIPE would end it, without a traceback.
+Letting go of ROS after the command is bounded: a teardown that does not end within
+:data:`TEARDOWN_LIMIT_S` ends the process by SIGALRM (exit status 142 in a shell), after the
+command's own output.
 """
 
 import argparse
@@ -32,6 +35,11 @@ from rclpy.utilities import remove_ros_args
 PROG = 'drive_bridge_ctl'
 DEFAULT_TIMEOUT_S = 10.0
 MAX_RATE_HZ = 1000.0
+# rclpy and Fast DDS let go of the command's node within this (about 50 ms as a rule); a CI
+# run once saw the command's process spin at full CPU for 60 s after its output (not seen
+# again in 570 runs): the alarm's default action then ends it, in the kernel, whatever holds
+# the GIL, also in the C++ teardown after the interpreter's.
+TEARDOWN_LIMIT_S = 10
 EXAMPLES = """examples:
   drive_bridge_ctl call feeder/start              # ros2 service call /feeder/start ...
   drive_bridge_ctl reference feeder 40            # ros2 topic pub --once ... "{data: 40.0}"
@@ -196,6 +204,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         drop_stdout()
         return EXIT_BROKEN_PIPE
     finally:
+        signal.signal(signal.SIGALRM, signal.SIG_DFL)
+        signal.alarm(TEARDOWN_LIMIT_S)
         session.close()
         node.destroy_node()
         rclpy.try_shutdown()

@@ -314,3 +314,29 @@ def test_no_node_is_one_line_that_names_what_is_there(line):
     result = ctl('--timeout', '1', 'state', 'feeder', where=[])  # default: /drive_bridge
     assert_one_line(result, 2, 'no node /drive_bridge within 1 s (ROS_DOMAIN_ID ')
     assert 'has /line1/drive_bridge: choose with --node' in result.stderr
+
+
+# drive_bridge_ctl whose teardown never ends (rclpy.try_shutdown replaced by a long sleep),
+# with a teardown limit of 1 s.
+HANGING_TEARDOWN = """
+import sys
+import time
+
+import rclpy
+from drive_bridge.ros import ctl
+
+ctl.TEARDOWN_LIMIT_S = 1
+rclpy.try_shutdown = lambda: time.sleep(60)
+sys.exit(ctl.main(sys.argv[1:]))
+"""
+
+
+def test_a_teardown_that_hangs_is_ended_by_the_alarm_after_the_command_s_output():
+    started = time.monotonic()
+    result = subprocess.run([sys.executable, '-c', HANGING_TEARDOWN, '--namespace', '/nowhere',
+                             '--timeout', '0.5', 'state', 'feeder'],
+                            capture_output=True, text=True, timeout=30, stdin=subprocess.DEVNULL)
+    seconds = time.monotonic() - started
+    assert result.returncode == -signal.SIGALRM, (result.returncode, result.stderr)
+    assert_one_line(result, -signal.SIGALRM, 'no node /nowhere/drive_bridge within 0.5 s')
+    assert seconds < 20  # the sleep would take 60 s
