@@ -235,14 +235,13 @@ def main() -> None:
           listening(arguments.listen) +
           (f', {arguments.calls:g} Trigger calls/s' if arguments.calls else '') +
           f'; {conditions()}')
-    listen_to = arguments.listen
     rclpy.init()
     compared = versions(arguments.compare)
     results: Dict[str, List[Dict]] = {label: [] for label, _ in compared}
     try:
         for index in range(arguments.runs):
             for label, source in compared:
-                results[label].append(measure(window_s, baudrate, listen_to,
+                results[label].append(measure(window_s, baudrate, arguments.listen,
                                               arguments.calls, source))
                 print_run(results[label][-1], index, label)
     finally:

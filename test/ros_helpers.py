@@ -108,6 +108,16 @@ def running_node(params_path, bus: Dict, devices: Dict[str, Dict], drives: Seque
         print(stop_node(process)[1])
 
 
+def spin_until(node: 'rclpy.node.Node', predicate, timeout_s: float) -> bool:
+    """Spin ``node`` until ``predicate`` holds or ``timeout_s`` passed; return the predicate."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        rclpy.spin_once(node, timeout_sec=0.05)
+    return bool(predicate())
+
+
 def lean_node(name: str) -> 'rclpy.node.Node':
     """
     Return a test node without the services no test calls on it.
@@ -160,12 +170,7 @@ class RosClient:
         return [m.data for m in self.messages[f'{self.prefix}{name}/{topic}']]
 
     def spin_until(self, predicate, timeout_s: float = 10.0) -> bool:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            rclpy.spin_once(self.node, timeout_sec=0.05)
-        return bool(predicate())
+        return spin_until(self.node, predicate, timeout_s)
 
     def state(self, name: str) -> str:
         states = self.values(name, 'state')

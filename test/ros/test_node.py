@@ -1,7 +1,6 @@
 """The node in a subprocess against the simulator, driven through rclpy clients."""
 
 import os
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from drive_bridge.sim.mcd_device import make_mcd_server
@@ -10,8 +9,8 @@ from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, Paramet
 from rcl_interfaces.srv import SetParameters
 import rclpy
 from ros_helpers import (
-    LATCHED, lean_node, node_output, RosClient, running_node, serving, start_node, stop_node,
-    write_params)
+    LATCHED, lean_node, node_output, RosClient, running_node, serving, spin_until, start_node,
+    stop_node, write_params)
 from std_msgs.msg import String
 
 # One worker runs this module's tests: its node, a module fixture, then starts once, not
@@ -182,13 +181,6 @@ def assert_one_line_config_error(process, expected: str) -> None:
     lines = [line for line in stderr.splitlines() if 'configuration error' in line]
     assert len(lines) == 1 and expected in lines[0], stderr
     assert 'Traceback' not in stderr, stderr
-
-
-def spin_until(node, predicate, timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not predicate() and time.monotonic() < deadline:
-        rclpy.spin_once(node, timeout_sec=0.05)
-    return bool(predicate())
 
 
 def test_diagnostics_nobody_listened_to_begin_when_a_subscription_comes(tmp_path):
