@@ -30,8 +30,9 @@ def sim():
 
 @pytest.fixture(params=marked_params(SERIAL_ENGINES))
 def transport(sim, request):
-    # 1 s: no test here times a reply, and a busy machine can hold the simulator up
-    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=1.0),
+    # 2 s: no test here times a reply, and a busy machine can hold the simulator up (the
+    # virtual machine itself stalled for over 1 s once beside a CPU hog)
+    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=2.0),
                                {'serial_engine': request.param})
     transport.connect()
     yield transport
