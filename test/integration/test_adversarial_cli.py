@@ -1,0 +1,155 @@
+"""
+Adversarial bad input to the drive-bridge CLI, beyond ``test_cli.py``'s tables.
+
+Values that Python's ``float`` reads but no one would type as a number, numbers in
+exponent notation, and files that are not UTF-8 text (a parameters file saved in Latin-1, a
+binary file given as a backup). Each must end in one line on stderr with exit status 2, and
+the simulated line must carry no write (read from the simulator's frame record).
+"""
+
+import contextlib
+import io
+
+from drive_bridge.protocol import rtu
+from drive_bridge.sim.devices import make_sim_server
+from drive_bridge.tools.cli import main
+import pytest
+
+
+def defect(reason: str):
+    """Mark a test that shows a product defect: it must fail, by an assertion, for ``reason``."""
+    return pytest.mark.xfail(strict=True, raises=AssertionError, reason=reason)
+
+
+WRITE_FUNCTIONS = (rtu.WRITE_SINGLE_COIL, rtu.WRITE_SINGLE_REGISTER, rtu.WRITE_MULTIPLE_COILS,
+                   rtu.WRITE_MULTIPLE_REGISTERS)
+FC51 = ['--family', 'fc', '--address', '1']
+MCD500 = ['--family', 'mcd', '--address', '20']
+HEAD = '/**/drive_bridge:\n  ros__parameters:\n'
+NOT_UTF8_REASON = ('a file that is not UTF-8 ends in a traceback (UnicodeDecodeError), exit 1: '
+                   'config.load_yaml_file catches OSError, ConfigError and YAMLError, but '
+                   "the decoding error of open(path)'s text stream is a ValueError")
+
+
+@pytest.fixture
+def line():
+    server = make_sim_server({1: 'fc51', 20: 'mcd500'})
+    server.open_pty()
+    server.record_frames = True
+    server.start()
+    yield server
+    server.stop()
+
+
+def bus(line):
+    return ['--port', line.pty_path, '--parity', 'N', '--baudrate', '115200', '--timeout',
+            '1.0', '--quiet']
+
+
+def run(*argv):
+    """Run the CLI in this process; return (exit status, stderr); a traceback fails here."""
+    error = io.StringIO()
+    with contextlib.redirect_stderr(error):
+        code = main([str(arg) for arg in argv], out=io.StringIO())
+    return code, error.getvalue()
+
+
+def writes(line):
+    with line.lock:
+        return [frame for frame in line.stats.frames if frame[1] in WRITE_FUNCTIONS]
+
+
+def assert_one_line_refusal(code, error, expected=''):
+    assert code == 2, error
+    assert error.startswith('drive-bridge: ') and error.count('\n') == 1, error
+    assert expected in error, error
+
+
+def odd_number(text):
+    return pytest.param(text, marks=defect(
+        f"{text!r} is written as a number: the CLI reads values with Python's float(), "
+        "which takes digit separators ('1_5' = 15) and non-ASCII digits ('\\uff14' = 4), "
+        'so a typo for 1.5 sets a 15 s ramp'))
+
+
+@pytest.mark.parametrize('value', ['nan', 'inf', '1e400', '0x10', '', ' ', '4,5', '1.5.1',
+                                   odd_number('1_5'), odd_number('\uff14')])
+def test_a_value_that_is_no_plain_number_is_refused_and_nothing_is_written(line, value):
+    ramp = line.devices[1].model.parameters.get(341)
+    code, error = run('set', *FC51, '3-41', value, *bus(line))
+    print(f'{value!r}: {code} {error!r}')
+    assert writes(line) == [] and line.devices[1].model.parameters.get(341) == ramp
+    assert_one_line_refusal(code, error, 'nothing written')
+
+
+@defect(
+    "'1e3' for an MCD register is refused as 'value 1000.0 does not fit a 16-bit "
+    "register' (devices/mcd.py parameter_plan: the value stays a float after the table "
+    "check), a wrong reason: 1000 fits, and '1000' is written")
+def test_a_number_in_exponent_notation_gets_a_true_answer(line):
+    code, error = run('set', *MCD500, '4', '1e3', *bus(line))
+    print(f'{code} {error!r}')
+    assert 'does not fit a 16-bit register' not in error, error
+    assert code == 0 and len(writes(line)) == 1  # written as 1000, as '1000' is
+
+
+def parameters_file(tmp_path, line, head=b''):
+    path = tmp_path / 'line.yaml'
+    path.write_bytes(head + (
+        "/**/drive_bridge:\n  ros__parameters:\n    port: '%s'\n    parity: 'N'\n"
+        '    baudrate: 115200\n    devices: [feeder]\n'
+        '    feeder: {family: fc, model: fc51, address: 1}\n' % line.pty_path).encode())
+    return path
+
+
+def test_a_clean_parameters_file_works(line, tmp_path):
+    """The control for the test below: the same file without the Latin-1 comment."""
+    code, error = run('status', '--config', parameters_file(tmp_path, line), '--quiet')
+    assert code == 0, error
+
+
+@pytest.mark.xfail(strict=True, raises=UnicodeDecodeError, reason=NOT_UTF8_REASON)
+def test_a_parameters_file_in_latin1_is_refused_in_one_line(line, tmp_path):
+    path = parameters_file(tmp_path, line, '# Förderband Halle 2\n'.encode('latin-1'))
+    code, error = run('status', '--config', path, '--quiet')
+    assert_one_line_refusal(code, error, str(path))
+    assert list(line.stats.frames) == []
+
+
+@pytest.mark.xfail(strict=True, raises=UnicodeDecodeError,
+                   reason=NOT_UTF8_REASON + ' (tools/backup_file.py)')
+def test_a_binary_file_given_to_restore_is_refused_in_one_line(line, tmp_path):
+    path = tmp_path / 'feeder.yaml'
+    path.write_bytes(bytes(range(256)))
+    code, error = run('restore', *FC51, path, *bus(line))
+    assert_one_line_refusal(code, error)
+    assert writes(line) == []
+
+
+@pytest.mark.parametrize('content, expected', [
+    ('- a\n- b\n', 'must map a node name'),
+    (HEAD + '    devices: [a]\n    devices: [b]\n',
+     "key 'devices' is given twice"),
+    (HEAD + '    devices: a\n    a: {family: fc}\n',
+     "'devices'"),
+    (HEAD + '    devices: [a]\n    a: [1, 2]\n', "'a."),
+    (HEAD + '    devices: [a]\n    a: {family: fc, address: 1, poll_rate: .nan}\n', 'finite'),
+    pytest.param('\x00\x01', 'is not valid YAML', marks=pytest.mark.xfail(
+        strict=True, raises=AssertionError, reason='a control character in the file: the '
+        "reason has two lines: yaml's ReaderError has no 'problem', and "
+        'config.load_yaml_file falls back to str(error), which ends in a second line '
+        '\'  in "<file>", position 1\'')),
+])
+def test_a_parameters_file_that_is_no_bus_is_refused_in_one_line(
+        line, tmp_path, content, expected):
+    path = tmp_path / 'params.yaml'
+    path.write_text(content)
+    code, error = run('status', '--config', path, '--quiet')
+    print(error)
+    assert_one_line_refusal(code, error, expected)
+    assert list(line.stats.frames) == []
+
+
+def test_a_directory_as_the_parameters_file(line, tmp_path):
+    code, error = run('status', '--config', tmp_path, '--quiet')
+    assert_one_line_refusal(code, error, 'cannot read the parameters file')
