@@ -153,3 +153,21 @@ def test_a_parameters_file_that_is_no_bus_is_refused_in_one_line(
 def test_a_directory_as_the_parameters_file(line, tmp_path):
     code, error = run('status', '--config', tmp_path, '--quiet')
     assert_one_line_refusal(code, error, 'cannot read the parameters file')
+
+
+def test_no_read_command_of_the_cli_writes_to_a_monitor_only_device(line, tmp_path):
+    """Monitor only writes nothing from any path: status, get, monitor and backup read only."""
+    path = tmp_path / 'watch.yaml'
+    path.write_text(HEAD + "    port: '%s'\n    parity: 'N'\n    baudrate: 115200\n"
+                    '    devices: [watch, soft]\n'
+                    '    watch: {family: fc, model: fc51, address: 1, allow_control: false}\n'
+                    '    soft: {family: mcd, model: mcd500, address: 20, allow_control: false}\n'
+                    % line.pty_path)
+    for device, number in (('watch', '3-41'), ('soft', '4')):
+        where = ['--config', path, '--device', device, '--quiet']
+        for argv in (['status'], ['get', number], ['monitor', '--count', '2', '--period', '0.2'],
+                     ['backup', tmp_path / f'{device}_backup.yaml']):
+            code, error = run(argv[0], *where, *argv[1:])
+            assert code == 0, (argv, error)
+    assert writes(line) == []
+    assert len(line.stats.frames) > 10  # they did talk to both devices

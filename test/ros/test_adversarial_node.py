@@ -321,6 +321,21 @@ def test_a_refused_value_of_the_wrong_type_leaves_the_declared_type(node, sim):
 
 
 @defect(
+    'drive_bridge_ctl reference conv 1_5 publishes 15 %: ros/ctl_values.reference_percent '
+    "(and _scalar for parameters) reads the text with Python's float(), which takes digit "
+    "separators ('1_5' = 15) and non-ASCII digits; a typo for 1.5 runs the drive at 15 %")
+def test_ctl_refuses_a_reference_that_is_no_plain_number(node, sim, conv_holds_10_pct):
+    conv = conv_holds_10_pct
+    result = ctl('reference', 'conv', '1_5')
+    print(f'ctl reference conv 1_5: {result.returncode} {result.stdout!r} {result.stderr!r}')
+    written = node.spin_until(lambda: conv.reference_word == 0x0999, 2.0)  # 15 %
+    node.publish_reference('conv', 10.0)
+    assert node.spin_until(lambda: conv.reference_word == REFERENCE_10_PCT)
+    assert not written, 'the text 1_5 reached the drive as 15 %'
+    assert result.returncode == 2 and result.stderr.count('\n') == 1, result.stderr
+
+
+@defect(
     'docs/configuration.md says "a double parameter set with an integer is refused: write'
     ' 10.0"; the node takes it (dynamic_typing descriptors, and settings.check_value '
     'accepts ints for floats), and the parameter is an integer from then on')
