@@ -171,3 +171,20 @@ def test_no_read_command_of_the_cli_writes_to_a_monitor_only_device(line, tmp_pa
             assert code == 0, (argv, error)
     assert writes(line) == []
     assert len(line.stats.frames) > 10  # they did talk to both devices
+
+
+@defect(
+    'a YAML alias bomb in a parameters file is expanded into the reason: settings._coerce '
+    "puts the value's repr in the message unbounded; 6 levels of 9 (a 442-byte file) give a "
+    '3 MB line, each level more 9 times that (8 levels: about 250 MB); the node is safe (rcl '
+    'refuses aliases first)')
+def test_an_alias_bomb_in_a_parameters_file_gets_a_short_line(tmp_path):
+    anchors = ["&l0 ['x', 'x', 'x', 'x', 'x', 'x', 'x', 'x', 'x']"] + [
+        f'&l{level} [' + ', '.join([f'*l{level - 1}'] * 9) + ']' for level in range(1, 6)]
+    path = tmp_path / 'bomb.yaml'
+    path.write_text(HEAD + "    port: /dev/null\n    parity: 'N'\n    devices: [a]\n"
+                    '    a: {family: mcd, address: 1, poll_rate: [%s]}\n' % ', '.join(anchors))
+    code, error = run('status', '--config', path, '--quiet')
+    print(f'{len(path.read_bytes())} bytes of file: {len(error)} characters of error')
+    assert_one_line_refusal(code, error, "'a.poll_rate'")
+    assert len(error) < 1000, f'a {len(error)}-character line'
