@@ -197,7 +197,8 @@ class DriveBridgeNode(LifecycleNode):
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         session = self._session
         return self._settings.on_set(parameters, self._gate.bus,
-                                     session.joint_bridge if session is not None else None)
+                                     session.joint_bridge if session is not None else None,
+                                     self)
 
     def _on_diagnostics_timer(self) -> None:
         self._calls.wake()  # answer calls the bus left waiting too long

@@ -5,7 +5,11 @@ The node's parameters: declared from the settings (:mod:`drive_bridge.config`), 
 bus's and devices' settings at configure (each once; a later configure reads them back), and
 builds the typed configuration from them; a value rclpy refuses gets the setting's reason.
 :class:`RuntimeSettings` is the on-set-parameters callback: it checks every change first and
-then applies them all at once, on the bus and on the joints, or none of them.
+then applies them all at once, on the bus and on the joints, or none of them. Without a bus
+(unconfigured, or after a cleanup) a change is kept for the next configure, which reads it
+back: it is checked then as now, and ``allow_control`` is switched on only where it could be
+with a bus (``allow_runtime_control_enable``), so that no lifecycle round trip turns a
+monitor-only device into one that takes commands.
 """
 
 import time
@@ -107,6 +111,16 @@ class TakesJointSettings(Protocol):
         """Take changes already applied on the bus."""
 
 
+class DeclaredParameters(Protocol):
+    """The node's parameters as they are before a change (:class:`rclpy.node.Node`)."""
+
+    def has_parameter(self, name: str) -> bool:
+        """Return whether ``name`` is declared."""
+
+    def get_parameter(self, name: str) -> Parameter:
+        """Return the declared parameter ``name``."""
+
+
 class RuntimeSettings:
     """The on-set-parameters callback: every change checked, then all applied or none."""
 
@@ -116,10 +130,11 @@ class RuntimeSettings:
         self.changes_in_words: Dict[str, str] = {}  # device -> allow_control changed, in words
 
     def on_set(self, parameters: List[Parameter], bus: Optional[BusMaster],
-               joints: Optional[TakesJointSettings]) -> SetParametersResult:
+               joints: Optional[TakesJointSettings],
+               declared: DeclaredParameters) -> SetParametersResult:
         """Check every change first, then apply them all at once on the bus, or none."""
-        if bus is None:  # declaring at configure: build_config validates them
-            return SetParametersResult(successful=True)
+        if bus is None:
+            return self._kept_for_configure(parameters, declared)
         try:
             changes = self._checked(parameters, bus)
             enabling = [device for device, change in changes.items()
@@ -134,6 +149,54 @@ class RuntimeSettings:
         self._record(changes, enabling)
         return SetParametersResult(successful=True)
 
+    def _kept_for_configure(self, parameters: List[Parameter],
+                            declared: DeclaredParameters) -> SetParametersResult:
+        """
+        Check changes made without a bus; the next configure reads them back.
+
+        A parameter not declared yet is being declared by the configure itself, from the
+        parameters file: the configuration built from them checks those.
+        """
+        settings = cfg.all_device_settings()
+        enabling, disabling = [], []
+        for parameter in parameters:
+            device, _, name = parameter.name.partition('.')
+            setting = settings.get(name)
+            if setting is None or not declared.has_parameter(parameter.name):
+                continue
+            try:
+                value = check_value(setting, parameter.value, parameter.name)
+            except ConfigError as error:
+                return SetParametersResult(successful=False, reason=str(error))
+            was = declared.get_parameter(parameter.name).value
+            if name == 'allow_control' and value and not was:
+                if not self.allow_runtime_control_enable:
+                    return SetParametersResult(successful=False,
+                                               reason=self._enabling_refused(parameter.name))
+                enabling.append(device)
+            elif name == 'allow_control' and was and not value:
+                disabling.append(device)
+        for device in disabling:
+            self.changes_in_words[device] = 'monitor only since a runtime change at ' + \
+                time.strftime('%Y-%m-%dT%H:%M:%S%z')
+        for device in enabling:
+            self._enabled(device, '(allow_control set true while the node has no bus): '
+                          'commands and writes are taken from the next configure')
+        return SetParametersResult(successful=True)
+
+    @staticmethod
+    def _enabling_refused(label: str) -> str:
+        """Return why ``label`` (an allow_control) may not be switched on at runtime."""
+        return (f'{label} cannot be switched on at runtime here '
+                '(allow_runtime_control_enable is false): restart the node with it '
+                'in the parameters file')
+
+    def _enabled(self, device: str, how: str) -> None:
+        """Log and keep that control was switched on for ``device`` at runtime."""
+        stamp = time.strftime('%Y-%m-%dT%H:%M:%S%z')
+        self.changes_in_words[device] = f'control enabled at runtime at {stamp}'
+        self._logger.warning(f'{device}: control ENABLED at runtime {how}')
+
     def _checked(self, parameters: List[Parameter], bus: BusMaster) -> SettingChanges:
         settings = cfg.all_device_settings()
         changes: SettingChanges = {}
@@ -143,22 +206,16 @@ class RuntimeSettings:
             if device not in bus.device_names or setting is None or not setting.runtime:
                 continue
             value = check_value(setting, parameter.value, parameter.name)
-            if name == 'allow_control' and value and not \
-                    bus.snapshot(device).allow_control and \
-                    not self.allow_runtime_control_enable:
-                raise ConfigError(
-                    f'{parameter.name} cannot be switched on at runtime here '
-                    '(allow_runtime_control_enable is false): restart the node with it '
-                    'in the parameters file')
+            if name == 'allow_control' and value and not bus.snapshot(device).allow_control \
+                    and not self.allow_runtime_control_enable:
+                raise ConfigError(self._enabling_refused(parameter.name))
             changes.setdefault(device, {})[name] = value
         return changes
 
     def _record(self, changes: SettingChanges, enabling: List[str]) -> None:
         for device in enabling:
-            stamp = time.strftime('%Y-%m-%dT%H:%M:%S%z')
-            self.changes_in_words[device] = f'control enabled at runtime at {stamp}'
-            self._logger.warning(f'{device}: control ENABLED at runtime (allow_control '
-                                 'set true): commands and writes are taken from now on')
+            self._enabled(device, '(allow_control set true): commands and writes are taken '
+                          'from now on')
         for device, change in changes.items():
             if change.get('allow_control') is False:
                 self.changes_in_words[device] = 'monitor only since a runtime change at ' + \

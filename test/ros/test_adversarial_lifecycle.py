@@ -24,14 +24,6 @@ def defect(reason: str):
     return pytest.mark.xfail(strict=True, raises=AssertionError, reason=reason)
 
 
-ENABLED_WITHOUT_A_BUS = defect(
-    'allow_control is switched on with a parameter set while the node has no bus (after '
-    'a cleanup), though allow_runtime_control_enable is false: '
-    'RuntimeSettings.on_set returns successful for anything when bus is None ("declaring '
-    'at configure: build_config validates them"), and the next configure reads the value '
-    'back (ParameterDeclarations._declare); the monitor-only drive then takes a start')
-
-
 @pytest.fixture
 def sim():
     server = make_sim_server({2: 'fc51'})
@@ -104,7 +96,6 @@ def test_control_is_not_enabled_while_the_node_runs(managed, sim):
     assert writes_to(sim, 2) == []
 
 
-@ENABLED_WITHOUT_A_BUS
 def test_control_is_not_enabled_after_a_cleanup(managed, sim):
     assert managed.transition(Transition.TRANSITION_CONFIGURE)
     assert managed.transition(Transition.TRANSITION_ACTIVATE)

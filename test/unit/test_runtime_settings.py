@@ -1,0 +1,90 @@
+"""RuntimeSettings without a bus: changes kept for the next configure are checked as with one."""
+
+from typing import Dict, List
+
+from drive_bridge.ros.parameters import RuntimeSettings
+import pytest
+from rclpy.parameter import Parameter
+
+
+class Logger:
+    def __init__(self):
+        self.warnings: List[str] = []
+
+    def warning(self, text: str) -> None:
+        self.warnings.append(text)
+
+
+class Declared:
+    """The node's parameters before the change (unconfigured, or after a cleanup)."""
+
+    def __init__(self, values: Dict[str, object]):
+        self.values = values
+
+    def has_parameter(self, name: str) -> bool:
+        return name in self.values
+
+    def get_parameter(self, name: str) -> Parameter:
+        return Parameter(name, value=self.values[name])
+
+
+MONITOR_ONLY = {'mon.allow_control': False, 'mon.poll_rate': 20.0}
+
+
+def set_without_bus(settings: RuntimeSettings, declared: Declared, **values):
+    parameters = [Parameter(name.replace('__', '.'), value=value)
+                  for name, value in values.items()]
+    return settings.on_set(parameters, None, None, declared)
+
+
+def test_control_is_not_switched_on_without_a_bus_where_the_site_forbids_it():
+    logger = Logger()
+    settings = RuntimeSettings(logger, allow_runtime_control_enable=False)
+    result = set_without_bus(settings, Declared(MONITOR_ONLY), mon__allow_control=True)
+    assert not result.successful
+    assert 'allow_runtime_control_enable is false' in result.reason
+    assert '\n' not in result.reason
+    assert logger.warnings == [] and settings.changes_in_words == {}
+
+
+def test_control_switched_on_without_a_bus_is_logged_and_kept_for_diagnostics():
+    logger = Logger()
+    settings = RuntimeSettings(logger, allow_runtime_control_enable=True)
+    result = set_without_bus(settings, Declared(MONITOR_ONLY), mon__allow_control=True)
+    assert result.successful
+    assert len(logger.warnings) == 1
+    assert logger.warnings[0].startswith('mon: control ENABLED at runtime')
+    assert 'next configure' in logger.warnings[0]
+    assert settings.changes_in_words['mon'].startswith('control enabled at runtime at ')
+
+
+def test_control_switched_off_without_a_bus_is_kept_for_diagnostics():
+    settings = RuntimeSettings(Logger(), allow_runtime_control_enable=False)
+    declared = Declared({'mon.allow_control': True})
+    assert set_without_bus(settings, declared, mon__allow_control=False).successful
+    assert settings.changes_in_words['mon'].startswith('monitor only since a runtime change')
+
+
+@pytest.mark.parametrize('value', [-5.0, float('nan'), 'fast'])
+def test_a_bad_value_without_a_bus_is_refused_at_once_in_one_line(value):
+    settings = RuntimeSettings(Logger(), allow_runtime_control_enable=True)
+    result = set_without_bus(settings, Declared(MONITOR_ONLY), mon__poll_rate=value)
+    assert not result.successful
+    assert "'mon.poll_rate'" in result.reason and '\n' not in result.reason
+
+
+def test_one_bad_value_refuses_the_whole_change_without_a_bus():
+    logger = Logger()
+    settings = RuntimeSettings(logger, allow_runtime_control_enable=True)
+    result = set_without_bus(settings, Declared(MONITOR_ONLY), mon__allow_control=True,
+                             mon__poll_rate=-5.0)
+    assert not result.successful
+    assert logger.warnings == [] and settings.changes_in_words == {}
+
+
+def test_parameters_being_declared_by_the_configure_are_left_to_it():
+    """Not declared yet: the configure declares them from the file and checks the result."""
+    settings = RuntimeSettings(Logger(), allow_runtime_control_enable=False)
+    result = set_without_bus(settings, Declared({}), mon__allow_control=True,
+                             mon__poll_rate=-5.0)
+    assert result.successful
