@@ -90,9 +90,13 @@ class ParameterDeclarations:
         if node.has_parameter(label):  # configured before, cleaned up since
             value = node.get_parameter(label).value
         else:
+            default, given = setting.default, self._overrides().get(label)
+            as_double = setting.kind is float and type(getattr(given, 'value', None)) is int
+            if as_double:  # 'poll_rate: 10' in the file: declared a double all the same
+                default = float(given.value)
             try:
-                value = node.declare_parameter(label, setting.default,
-                                               descriptor(setting, label)).value
+                value = node.declare_parameter(label, default, descriptor(setting, label),
+                                               ignore_override=as_double).value
             except Exception:  # noqa: B902 - rclpy's range errors: say it our way
                 override = self._overrides().get(label)
                 check_value(setting, getattr(override, 'value', None), label)
@@ -111,6 +115,35 @@ class TakesJointSettings(Protocol):
         """Take changes already applied on the bus."""
 
 
+def checked_value(setting: Setting, parameter: Parameter) -> Any:
+    """
+    Return a runtime change's value checked against its setting, or raise ConfigError.
+
+    An integer for a double is refused, as rclpy refuses a value of another type for a
+    statically typed parameter: ``ros2 param set`` types ``10`` as an integer.
+    """
+    if setting.kind is float and parameter.type_ == Parameter.Type.INTEGER:
+        raise ConfigError(f'parameter {parameter.name!r} = {parameter.value} is an integer: '
+                          f'give a double ({parameter.value}.0)')
+    return check_value(setting, parameter.value, parameter.name)
+
+
+def keep_declared_types(parameters: List[Parameter], declared: 'DeclaredParameters') -> None:
+    """
+    After a refused change, give each parameter back the type of the value it kept.
+
+    The parameters are dynamically typed (:func:`descriptor`), and rclpy writes a value's
+    type into the stored descriptor before the on-set callback may refuse the value: a
+    refused ``'fast'`` for ``poll_rate`` would leave it described as a string parameter, and
+    ``drive_bridge_ctl`` types what it sends as the node describes it.
+    """
+    settings = cfg.all_device_settings()
+    for parameter in parameters:
+        setting = settings.get(parameter.name.partition('.')[2])
+        if setting is not None and setting.runtime and declared.has_parameter(parameter.name):
+            declared.set_descriptor(parameter.name, descriptor(setting, parameter.name))
+
+
 class DeclaredParameters(Protocol):
     """The node's parameters as they are before a change (:class:`rclpy.node.Node`)."""
 
@@ -119,6 +152,9 @@ class DeclaredParameters(Protocol):
 
     def get_parameter(self, name: str) -> Parameter:
         """Return the declared parameter ``name``."""
+
+    def set_descriptor(self, name: str, descriptor: ParameterDescriptor) -> Any:
+        """Give the declared parameter ``name`` this descriptor (its value is kept)."""
 
 
 class RuntimeSettings:
@@ -133,8 +169,15 @@ class RuntimeSettings:
                joints: Optional[TakesJointSettings],
                declared: DeclaredParameters) -> SetParametersResult:
         """Check every change first, then apply them all at once on the bus, or none."""
-        if bus is None:
-            return self._kept_for_configure(parameters, declared)
+        result = self._kept_for_configure(parameters, declared) if bus is None else \
+            self._applied(parameters, bus, joints)
+        if not result.successful:
+            keep_declared_types(parameters, declared)
+        return result
+
+    def _applied(self, parameters: List[Parameter], bus: BusMaster,
+                 joints: Optional[TakesJointSettings]) -> SetParametersResult:
+        """Check every change, then apply them all on the bus and the joints, or none."""
         try:
             changes = self._checked(parameters, bus)
             enabling = [device for device, change in changes.items()
@@ -165,7 +208,7 @@ class RuntimeSettings:
             if setting is None or not declared.has_parameter(parameter.name):
                 continue
             try:
-                value = check_value(setting, parameter.value, parameter.name)
+                value = checked_value(setting, parameter)
             except ConfigError as error:
                 return SetParametersResult(successful=False, reason=str(error))
             was = declared.get_parameter(parameter.name).value
@@ -205,7 +248,7 @@ class RuntimeSettings:
             setting = settings.get(name)
             if device not in bus.device_names or setting is None or not setting.runtime:
                 continue
-            value = check_value(setting, parameter.value, parameter.name)
+            value = checked_value(setting, parameter)
             if name == 'allow_control' and value and not bus.snapshot(device).allow_control \
                     and not self.allow_runtime_control_enable:
                 raise ConfigError(self._enabling_refused(parameter.name))

@@ -303,11 +303,6 @@ def ctl(*args):
                           capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
 
 
-@defect(
-    'a refused set of the wrong type still changes the declared type: descriptors are '
-    "dynamic_typing (ros/parameters.py descriptor()), and rclpy's Node._apply_descriptor "
-    'writes the new type into the stored descriptor before RuntimeSettings.on_set refuses'
-    ' the value; describe then says string, and drive_bridge_ctl types 10 as a string')
 def test_a_refused_value_of_the_wrong_type_leaves_the_declared_type(node, sim):
     refused = node.set_parameter('conv.poll_rate', 'fast')
     assert not refused.successful
@@ -335,10 +330,6 @@ def test_ctl_refuses_a_reference_that_is_no_plain_number(node, sim, conv_holds_1
     assert result.returncode == 2 and result.stderr.count('\n') == 1, result.stderr
 
 
-@defect(
-    'docs/configuration.md says "a double parameter set with an integer is refused: write'
-    ' 10.0"; the node takes it (dynamic_typing descriptors, and settings.check_value '
-    'accepts ints for floats), and the parameter is an integer from then on')
 def test_an_integer_for_a_double_parameter_is_refused_as_the_docs_say(node, sim):
     """docs/configuration.md: 'a double parameter set with an integer is refused'."""
     result = set_raw(node, [('conv.poll_rate', ParameterValue(

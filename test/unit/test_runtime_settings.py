@@ -1,4 +1,4 @@
-"""RuntimeSettings without a bus: changes kept for the next configure are checked as with one."""
+"""RuntimeSettings: changes without a bus checked as with one; types kept after a refusal."""
 
 from typing import Dict, List
 
@@ -20,12 +20,16 @@ class Declared:
 
     def __init__(self, values: Dict[str, object]):
         self.values = values
+        self.descriptors: Dict[str, object] = {}
 
     def has_parameter(self, name: str) -> bool:
         return name in self.values
 
     def get_parameter(self, name: str) -> Parameter:
         return Parameter(name, value=self.values[name])
+
+    def set_descriptor(self, name: str, descriptor) -> None:
+        self.descriptors[name] = descriptor
 
 
 MONITOR_ONLY = {'mon.allow_control': False, 'mon.poll_rate': 20.0}
@@ -88,3 +92,27 @@ def test_parameters_being_declared_by_the_configure_are_left_to_it():
     result = set_without_bus(settings, Declared({}), mon__allow_control=True,
                              mon__poll_rate=-5.0)
     assert result.successful
+
+
+def test_an_integer_for_a_double_is_refused_naming_the_parameter():
+    settings = RuntimeSettings(Logger(), allow_runtime_control_enable=True)
+    result = set_without_bus(settings, Declared(MONITOR_ONLY), mon__poll_rate=10)
+    assert not result.successful
+    assert result.reason == "parameter 'mon.poll_rate' = 10 is an integer: give a double (10.0)"
+
+
+def test_a_refused_change_gives_each_runtime_parameter_its_descriptor_back():
+    """The stored descriptor was typed as the refused value by rclpy: it is given back."""
+    declared = Declared(MONITOR_ONLY)
+    settings = RuntimeSettings(Logger(), allow_runtime_control_enable=True)
+    assert not set_without_bus(settings, declared, mon__poll_rate='fast').successful
+    given_back = declared.descriptors['mon.poll_rate']
+    assert given_back.name == 'mon.poll_rate' and given_back.dynamic_typing
+    assert not given_back.read_only and given_back.floating_point_range
+
+
+def test_an_accepted_change_leaves_the_descriptors_alone():
+    declared = Declared(MONITOR_ONLY)
+    settings = RuntimeSettings(Logger(), allow_runtime_control_enable=True)
+    assert set_without_bus(settings, declared, mon__poll_rate=10.0).successful
+    assert declared.descriptors == {}
