@@ -37,6 +37,7 @@ from drive_bridge.ros.parameters import ParameterDeclarations, RuntimeSettings
 from drive_bridge.ros.service_calls import ServiceCalls
 from drive_bridge.ros.session import BusSession, give_up_s
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.timer import Timer
 
@@ -136,8 +137,11 @@ class DriveBridgeNode(LifecycleNode):
         self._gate.bus = self._session.bus
         self._session.add_interfaces(self, CommandPaths(
             self._gate, self._calls, self._inputs, give_up_s(self.config)))
-        self._diagnostics_timer = self.create_timer(self.config.diagnostics_period_s,
-                                                    self._on_diagnostics_timer)
+        # The steady clock: with use_sim_time and no /clock (a line has none) the node's clock
+        # stands still, and /diagnostics and the give-up of waiting calls would stop with it.
+        self._diagnostics_timer = self.create_timer(
+            self.config.diagnostics_period_s, self._on_diagnostics_timer,
+            clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._session.start()
         self._inputs.start()
         return TransitionCallbackReturn.SUCCESS

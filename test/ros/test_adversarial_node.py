@@ -387,11 +387,6 @@ def test_nothing_reaches_a_monitor_only_drive_from_any_ros_path(node, sim):
     set_raw(node, [('mon.poll_rate', double(20.0)), ('mon.speed_reference', double(0.0))])
 
 
-@defect(
-    'use_sim_time true (a standard parameter, writable by any process; no /clock on a '
-    'hardware line) is taken without a word, and /diagnostics stops: the diagnostics timer '
-    '(node.py create_timer) runs on the node clock, which then waits for /clock; an '
-    'offline or tripped device is no longer reported')
 def test_use_sim_time_without_a_clock_does_not_silence_diagnostics(node, sim):
     result = node.set_parameter('use_sim_time', True)
     try:
