@@ -224,10 +224,6 @@ def test_an_empty_joint_state_is_counted_and_sends_nothing(node, sim, conv_holds
     alive_and_serving(node, sim)
 
 
-@defect(
-    'a JointState naming a joint twice is taken pair by pair (JointCommands.on_commands):'
-    ' [3, NaN] sends 3 rad/s, [3, 2.5] sends 2.5 rad/s; neither is refused nor counted, '
-    'though the message contradicts itself')
 @pytest.mark.parametrize('velocities', [[3.0, math.nan], [3.0, 2.5]],
                          ids=['then NaN', 'then 2.5'])
 def test_a_joint_named_twice_in_one_message_is_refused(node, sim, conv_holds_10_pct,

@@ -371,6 +371,65 @@ def test_serialized_commands_are_taken_as_the_messages_they_carry():
     assert 'not a JointState' in status.message and 'nothing sent' in status.message
 
 
+@pytest.mark.parametrize('names, velocities', [
+    (['left_wheel', 'left_wheel'], [3.0, math.nan]),
+    (['left_wheel', 'left_wheel'], [3.0, 2.5]),
+    (['left_wheel', 'left_wheel'], [3.0, 3.0]),  # the same twice: still a repeated name
+    (['right_wheel', 'left_wheel', 'left_wheel'], [1.0, 3.0, 2.5]),  # the others neither
+    (['caster', 'left_wheel', 'caster'], [1.0, 3.0, 2.0]),  # an unknown name twice
+], ids=['then NaN', 'then 2.5', 'same value', 'with another joint', 'unknown twice'])
+def test_a_message_naming_a_joint_twice_is_refused_whole(names, velocities):
+    serialize = pytest.importorskip('rclpy.serialization').serialize_message
+    bench = Bench(command_mode='auto_start')
+    bench.run(0.3)
+    writes = len(bench.line.writes)
+    stats = {device: bench.stats(device) for device in ('left', 'right')}
+    repeated = next(name for name in names if names.count(name) > 1)
+    bench.bridge.on_commands(JointState(name=names, velocity=velocities))
+    bench.bridge.on_serialized_commands(serialize(JointState(name=names, velocity=velocities)))
+    assert (bench.reference_word('left'), bench.reference_word('right')) == (0, 0)
+    assert bench.line.writes[writes:] == []  # nothing sent, nothing started
+    assert {device: bench.stats(device) for device in ('left', 'right')} == stats
+    assert bench.bridge.counters == {'messages': 2, 'unknown_names': 0,
+                                     'without_velocity': 0, 'malformed': 2}
+    warnings = [text for level, text in bench.logger.lines if level == 'warning']
+    assert len(warnings) == 1 and '\n' not in warnings[0]  # throttled: once a second
+    assert f'joint {repeated!r} named 2 times in one message' in warnings[0]
+    assert 'nothing sent' in warnings[0]
+    status = bench.bridge.commands_status('drive_bridge: ~/joint_commands')
+    values = {kv.key: kv.value for kv in status.values}
+    assert values['messages_malformed'] == '2' and values['last_ignored'] == warnings[0]
+    bench.run(0.5)
+    assert not bench.bus.snapshot('left').holds_run and not bench.bus.snapshot('right').holds_run
+    bench.command(left_wheel=2.0, right_wheel=-4.0)  # a message that names each once is taken
+    assert (bench.reference_word('left'), bench.reference_word('right')) == (0x0666, 0x0CCC)
+
+
+def test_repeated_names_are_logged_apart_from_other_malformed_messages():
+    bench = Bench()
+    bench.run(0.3)
+    bench.bridge.on_commands(JointState(name=['left_wheel', 'right_wheel'], velocity=[1.0]))
+    bench.bridge.on_commands(JointState(name=['left_wheel', 'left_wheel'], velocity=[1.0, 2.0]))
+    warnings = [text for level, text in bench.logger.lines if level == 'warning']
+    assert len(warnings) == 2 and 'velocities: ignored' in warnings[0]
+    assert "joint 'left_wheel' named 2 times" in warnings[1]
+
+
+def test_a_joint_named_thousands_of_times_gets_one_short_line():
+    serialize = pytest.importorskip('rclpy.serialization').serialize_message
+    bench = Bench()
+    bench.run(0.3)
+    count = 20000
+    bench.bridge.on_serialized_commands(serialize(JointState(
+        name=[f'j{index}' for index in range(count)] + ['left_wheel'] * count,
+        velocity=[1.0] * (2 * count))))
+    assert bench.reference_word('left') == 0
+    assert bench.bridge.counters['malformed'] == 1
+    (line,) = [text for level, text in bench.logger.lines if level == 'warning']
+    assert f"joint 'left_wheel' named {count} times" in line
+    assert '[1.0, 1.0, 1.0, 1.0, ...]' in line and len(line) < 300
+
+
 def test_warnings_are_logged_at_most_once_a_second_per_kind():
     bench = Bench()
     bench.run(0.3)

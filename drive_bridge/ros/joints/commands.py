@@ -5,13 +5,15 @@ rad/s -> % by ``velocity_scale``, through :meth:`BusMaster.set_speed_reference` 
 ``from_topic``, so the rules, the counters and the deadman are those of ``speed_reference``;
 the bus writes the latest reference with its next poll, so commands cost no bus traffic of
 their own. Unknown names, messages without velocities and messages whose velocities do not
-match their names are counted and logged at most once a second per kind.
+match their names are counted and logged at most once a second per kind. A message that
+names a joint twice contradicts itself: it is refused whole (counted as malformed), so that
+neither of its velocities for that joint, nor any other of its velocities, is sent.
 """
 
 from dataclasses import dataclass, field
 import functools
 import threading
-from typing import Callable, Dict, Union
+from typing import Callable, Dict, Sequence, Set, Union
 
 from drive_bridge.bus.master import BusMaster
 from drive_bridge.errors import CommandRefused
@@ -22,6 +24,8 @@ from drive_bridge.ros.joints.wire import JointCommand, MalformedCommand, read_jo
 from drive_bridge.ros.throttle import Throttle
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
+
+SHOWN_VELOCITIES = 4  # a joint named 10000 times is logged with its first 4 velocities
 
 
 @dataclass
@@ -56,6 +60,27 @@ class CommandCounts:
         """Return a copy taken at one moment (any thread)."""
         with self.lock:
             return CommandCounts(dict(self.counters), self.last_ignored, self.last_ignored_s)
+
+
+def first_repeated(names: Sequence[str]) -> str:
+    """Return the first name that ``names`` holds more than once ('' if none)."""
+    seen: Set[str] = set()
+    for name in names:
+        if name in seen:
+            return name
+        seen.add(name)
+    return ''
+
+
+def repeated_name_text(names: Sequence[str], velocities: Sequence[float]) -> str:
+    """Return why a message that names a joint more than once is refused, in one line."""
+    name = first_repeated(names)
+    given = [velocity for other, velocity in zip(names, velocities) if other == name]
+    shown = ', '.join(repr(velocity) for velocity in given[:SHOWN_VELOCITIES])
+    more = ', ...' if len(given) > SHOWN_VELOCITIES else ''
+    return (f'{COMMANDS_TOPIC}: joint {name!r} named {len(given)} times in one message '
+            f'(velocities [{shown}{more}] rad/s): the message contradicts itself: ignored, '
+            'nothing sent')
 
 
 class JointCommands:
@@ -98,6 +123,10 @@ class JointCommands:
             self._ignored('malformed', f'{COMMANDS_TOPIC}: {len(message.name)} names but '
                           f'{len(message.velocity)} velocities: ignored, nothing sent')
             return
+        if len(message.name) > 1 and len(set(message.name)) < len(message.name):
+            self._ignored('malformed', repeated_name_text(message.name, message.velocity),
+                          kind='repeated names')
+            return
         for name, velocity in zip(message.name, message.velocity):
             joint = self._by_name.get(name)
             if joint is None:
@@ -106,9 +135,10 @@ class JointCommands:
                 continue
             self._command(joint, velocity)
 
-    def _ignored(self, counter: str, text: str) -> None:
+    def _ignored(self, counter: str, text: str, kind: str = '') -> None:
+        """Count an ignored message and log why (throttled per ``kind``, else ``counter``)."""
         self.counts.ignored(counter, text, self._clock())
-        self._warn(counter, text)
+        self._warn(kind or counter, text)
 
     def _command(self, joint: Joint, velocity: float) -> None:
         spec = joint.spec
