@@ -623,22 +623,41 @@ def load_yaml_file(path: str, label: str, loader: Optional[Callable[[], Any]] = 
     Return the content of the YAML file ``path``, refusing a key given twice.
 
     Raises ConfigError in one line naming the file as ``label`` if it cannot be read, is not
-    YAML, or has a key twice (with both lines). ``loader`` makes the YAML loader to use
-    (default :func:`duplicate_key_loader`).
+    UTF-8 text (with the byte's offset), is not YAML (a control character: which, where),
+    or has a key twice (with both lines). ``loader`` makes the YAML loader to use (default
+    :func:`duplicate_key_loader`).
     """
     import yaml
+    text = read_text_file(path, label)
     try:
-        with open(path) as stream:
-            return yaml.load(stream, Loader=(loader or duplicate_key_loader)())
-    except OSError as error:
-        raise ConfigError(f'cannot read {label}: {error.strerror}') from None
+        return yaml.load(text, Loader=(loader or duplicate_key_loader)())
     except ConfigError as error:
         raise ConfigError(f'{label}: {error}') from None
+    except yaml.reader.ReaderError as error:  # no 'problem': its str() has a second line
+        line = text.count('\n', 0, error.position) + 1
+        raise ConfigError(f'{label} is not valid YAML at line {line}: control character '
+                          f'U+{error.character:04X} at position {error.position} is not '
+                          'allowed') from None
     except yaml.YAMLError as error:
         where = getattr(error, 'problem_mark', None)
         line = f' at line {where.line + 1}' if where is not None else ''
         raise ConfigError(f'{label} is not valid YAML{line}: '
                           f'{getattr(error, "problem", None) or error}') from None
+
+
+def read_text_file(path: str, label: str) -> str:
+    """Return the UTF-8 text of the file ``path``; raise ConfigError (one line, ``label``)."""
+    try:
+        with open(path, 'rb') as stream:
+            content = stream.read()
+    except OSError as error:
+        raise ConfigError(f'cannot read {label}: {error.strerror}') from None
+    try:
+        return content.decode('utf-8')
+    except UnicodeDecodeError as error:
+        line = content.count(b'\n', 0, error.start) + 1
+        raise ConfigError(f'{label} is not UTF-8 text: byte {content[error.start]:#04x} at '
+                          f'line {line}, offset {error.start} (save it as UTF-8)') from None
 
 
 def load_params_file(path: str) -> Dict[str, Dict[str, Any]]:

@@ -1,17 +1,69 @@
 """
-What the package's terminal commands share: their exit when the reader of their output goes.
+What the package's terminal commands share: how they read a number, and how they end.
 
-``drive-bridge monitor ... | head -3`` or ``drive_bridge_ctl echo ... | head -2``: once the
-reader has gone, the next write raises ``BrokenPipeError``. The command then ends as SIGPIPE
-would end a C program, with :data:`EXIT_BROKEN_PIPE` and nothing on stderr, and points its
-stdout at /dev/null first, so that Python's flush at exit raises nothing either (Python's note
-on SIGPIPE, in the ``signal`` module's documentation).
+A number a user types (``drive-bridge set 3-41 1.5``, ``drive_bridge_ctl reference conv 40``,
+``--timeout 2``) is a plain ASCII decimal: an optional sign, digits, an optional fraction and
+an optional exponent (``1.5``, ``-12``, ``.5``, ``1e3``); an integer is an optional sign and
+digits. Python's ``float()`` and ``int()`` also take ``1_5`` (15), full-width and other
+Unicode digits (U+FF14, a full-width 4, is 4) and spaces around the text;
+:func:`parse_number` and :func:`parse_integer` take none of them, so a typo for 1.5 is
+refused instead of setting 15. ``nan`` and ``inf`` are read, for the caller to refuse with
+its own reason.
+
+Their exit when the reader of their output goes (``drive-bridge monitor ... | head -3``,
+``drive_bridge_ctl echo ... | head -2``): once the reader has gone, the next write raises
+``BrokenPipeError``. The command then ends as SIGPIPE would end a C program, with
+:data:`EXIT_BROKEN_PIPE` and nothing on stderr, and points its stdout at /dev/null first, so
+that Python's flush at exit raises nothing either (Python's note on SIGPIPE, in the
+``signal`` module's documentation).
 """
 
 import os
+import re
 import sys
+from typing import Union
 
 EXIT_BROKEN_PIPE = 141  # the reader of stdout went away: as a program SIGPIPE ended
+_INTEGER = re.compile(r'[+-]?[0-9]+')
+_NUMBER = re.compile(r'[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?')
+_NOT_FINITE = re.compile(r'[+-]?(nan|inf|infinity)', re.IGNORECASE)
+
+
+def parse_integer(text: str) -> int:
+    """Return ``text`` as an int if it is an optional sign and ASCII digits; else ValueError."""
+    if not _INTEGER.fullmatch(text):
+        raise ValueError(f'{text!r} is not a whole number (write ASCII digits, e.g. 12)')
+    return int(text)
+
+
+def parse_number(text: str) -> Union[int, float]:
+    """
+    Return ``text`` as a plain ASCII decimal number, or raise ValueError in one line.
+
+    An int when ``text`` is an integer (``12``), else a float (``1.5``, ``1e3``). ``nan`` and
+    ``inf`` (``1e400`` too) give NaN and infinity, for the caller to refuse with its reason.
+    """
+    if _INTEGER.fullmatch(text):
+        return int(text)
+    if not (_NUMBER.fullmatch(text) or _NOT_FINITE.fullmatch(text)):
+        raise ValueError(f'{text!r} is not a plain decimal number (write e.g. 12, -1.5 or '
+                         '1e3)')
+    return float(text)
+
+
+def integer_argument(text: str) -> int:
+    """Return ``text`` read by :func:`parse_integer` (an argparse type)."""
+    return parse_integer(text)
+
+
+def number_argument(text: str) -> float:
+    """Return ``text`` read by :func:`parse_number`, as a float (an argparse type)."""
+    return float(parse_number(text))
+
+
+# argparse names the type in its message: "argument --timeout: invalid float value: 'x'"
+integer_argument.__name__ = 'int'
+number_argument.__name__ = 'float'
 
 
 def drop_stdout() -> None:

@@ -9,9 +9,14 @@ wherever it comes from.
 
 from dataclasses import dataclass
 import math
+import reprlib
 from typing import Any, Optional, Tuple
 
 from drive_bridge.errors import ConfigError
+
+MAX_SHOWN_CHARACTERS = 80
+_SHORT_REPR = reprlib.Repr()
+_SHORT_REPR.maxstring = _SHORT_REPR.maxother = MAX_SHOWN_CHARACTERS
 
 
 @dataclass(frozen=True)
@@ -50,12 +55,25 @@ def check_value(setting: Setting, value: Any, label: str) -> Any:
         raise ConfigError(f'parameter {label!r} is required: allowed {setting.allowed()}')
     value = _coerce(setting, value, label)
     if setting.choices and value not in setting.choices:
-        raise ConfigError(f'parameter {label!r} = {value!r} is invalid: allowed '
+        raise ConfigError(f'parameter {label!r} = {shown(value)} is invalid: allowed '
                           f'{setting.allowed()}')
     if setting.low is not None and not _in_range(setting, value):
-        raise ConfigError(f'parameter {label!r} = {value!r} is out of range: allowed '
+        raise ConfigError(f'parameter {label!r} = {shown(value)} is out of range: allowed '
                           f'{setting.allowed()}')
     return value
+
+
+def shown(value: Any) -> str:
+    """
+    Return the repr of ``value`` for a message, at most :data:`MAX_SHOWN_CHARACTERS` long.
+
+    reprlib stops at a few items and levels, so a YAML alias bomb (a short file whose aliases
+    expand to megabytes) is neither expanded into the message nor walked in full.
+    """
+    text = _SHORT_REPR.repr(value)
+    if len(text) <= MAX_SHOWN_CHARACTERS:
+        return text
+    return text[:MAX_SHOWN_CHARACTERS - 3] + '...'
 
 
 def _coerce(setting: Setting, value: Any, label: str) -> Any:
@@ -70,10 +88,10 @@ def _coerce(setting: Setting, value: Any, label: str) -> Any:
         hint = ''
         if setting.name == 'parity' and isinstance(value, bool):
             hint = ' (write parity: "N" with quotes: unquoted N is YAML false)'
-        raise ConfigError(f'parameter {label!r} = {value!r} has the wrong type: allowed '
+        raise ConfigError(f'parameter {label!r} = {shown(value)} has the wrong type: allowed '
                           f'{setting.allowed()}{hint}')
     if setting.kind is float and (math.isnan(value) or math.isinf(value)):
-        raise ConfigError(f'parameter {label!r} = {value!r} must be a finite number')
+        raise ConfigError(f'parameter {label!r} = {shown(value)} must be a finite number')
     return list(value) if setting.kind is list else value
 
 

@@ -23,7 +23,8 @@ import sys
 import threading
 from typing import List, Optional
 
-from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE
+from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE, integer_argument, \
+    number_argument
 from drive_bridge.ros import ctl_commands as commands
 from drive_bridge.ros.ctl_params import ParameterCommands
 from drive_bridge.ros.ctl_session import BridgeSession, Interrupted
@@ -77,7 +78,7 @@ def _options() -> argparse.ArgumentParser:
     where.add_argument('--namespace', dest='bridge_namespace', metavar='NS',
                        help="the bridge node's namespace: --namespace /line1 is --node "
                        '/line1/drive_bridge')
-    options.add_argument('--timeout', type=float, metavar='S',
+    options.add_argument('--timeout', type=number_argument, metavar='S',
                          help=f'seconds to wait for the node, and for each answer (default '
                          f'{DEFAULT_TIMEOUT_S:g})')
     return options
@@ -99,13 +100,13 @@ def _parser() -> argparse.ArgumentParser:
         'exit status 1 if it answers success: false', 'service')
     command = add(sub, 'reference', 'publish a speed reference in percent to a drive, once '
                   '(delivered to the node) or at --rate HZ until Ctrl-C', 'device', 'percent')
-    command.add_argument('--rate', type=float, metavar='HZ',
+    command.add_argument('--rate', type=number_argument, metavar='HZ',
                          help='publish at this rate until Ctrl-C or SIGTERM (a stream, for '
                          'reference_timeout)')
     add(sub, 'state', 'print the latched state of a device', 'device')
     command = add(sub, 'echo', "print the messages on a topic (relative names: in the node's "
                   'namespace) until Ctrl-C', 'topic')
-    command.add_argument('--count', type=int, metavar='N',
+    command.add_argument('--count', type=integer_argument, metavar='N',
                          help='stop after N messages (each within --timeout)')
     param = sub.add_parser('param', parents=[options],
                            help="get, set, list or describe the node's parameters")

@@ -10,6 +10,7 @@ import math
 from typing import Any, List, Tuple
 
 from drive_bridge import config as cfg
+from drive_bridge.console import parse_integer, parse_number
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rclpy.exceptions import InvalidNamespaceException, InvalidNodeNameException, \
     InvalidServiceNameException, InvalidTopicNameException
@@ -88,7 +89,7 @@ def resolve(name: str, namespace: str, is_service: bool = False) -> str:
 def reference_percent(text: str) -> float:
     """Return a speed reference in percent; refuse what the node would refuse."""
     try:
-        value = float(text)
+        value = float(parse_number(text))
     except ValueError:
         raise BadInput(f'speed reference {text!r} is not a number: give percent, e.g. 40 or '
                        '-12.5; nothing sent') from None
@@ -122,12 +123,12 @@ def parameter_value(name: str, text: str, kind: int) -> ParameterValue:
 
 def _yaml_list(name: str, text: str, kind: int) -> List[Any]:
     try:
-        items = yaml.safe_load(text)
+        items = yaml.load(text, Loader=yaml.BaseLoader)  # text items: _scalar reads them
     except yaml.YAMLError:
         items = None
     if not isinstance(items, list):
         raise BadInput(f'{name} is a {TYPE_NAMES[kind]}: write [a, b, ...], not {text!r}')
-    return ['true' if item is True else 'false' if item is False else item for item in items]
+    return items
 
 
 def _scalar(name: str, text: str, kind: int) -> Any:
@@ -137,13 +138,13 @@ def _scalar(name: str, text: str, kind: int) -> Any:
         return text.strip().lower() == 'true'
     if kind == ParameterType.PARAMETER_INTEGER:
         try:
-            return int(text)
+            return parse_integer(text)
         except ValueError:
             raise BadInput(f'{name} is an integer: write a whole number, not {text!r}') \
                 from None
     if kind == ParameterType.PARAMETER_DOUBLE:
         try:
-            value = float(text)
+            value = float(parse_number(text))
         except ValueError:
             raise BadInput(f'{name} is a double: write a number, not {text!r}') from None
         if not math.isfinite(value):

@@ -34,7 +34,8 @@ import textwrap
 from typing import List, Optional
 
 from drive_bridge import config as cfg
-from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE
+from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE, integer_argument, \
+    number_argument, parse_integer, parse_number
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError, ModelMismatch
 from drive_bridge.tools.cli_backup import command_backup, command_restore
 from drive_bridge.tools.cli_parameter import command_get, command_set
@@ -156,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
 def positive_seconds(text: str) -> float:
     """Return ``text`` as a positive, finite number of seconds (an argparse type)."""
     try:
-        value = float(text)
+        value = float(parse_number(text))
     except ValueError:
         value = math.nan
     if not (math.isfinite(value) and value > 0):
@@ -166,9 +167,13 @@ def positive_seconds(text: str) -> float:
 
 def poll_count(text: str) -> int:
     """Return ``text`` as a whole number, 0 or more (an argparse type)."""
-    if not text.isdigit():
+    try:
+        count = parse_integer(text)
+    except ValueError:
+        count = -1
+    if count < 0:
         raise argparse.ArgumentTypeError(f'{text!r} is not a whole number, 0 or more')
-    return int(text)
+    return count
 
 
 def _subcommand_adder(commands):
@@ -187,12 +192,14 @@ def _subcommand_adder(commands):
         bus.add_argument('--protocol', choices=tuple(PROTOCOLS))
         bus.add_argument('--port', help='serial device or URL (default /dev/ttyUSB0)')
         bus.add_argument('--host', help='gateway host (modbus_tcp, rtu_over_tcp)')
-        bus.add_argument('--tcp-port', dest='tcp_port', type=int, help='gateway TCP port')
-        bus.add_argument('--baudrate', type=int, help='default 9600')
+        bus.add_argument('--tcp-port', dest='tcp_port', type=integer_argument,
+                         help='gateway TCP port')
+        bus.add_argument('--baudrate', type=integer_argument, help='default 9600')
         bus.add_argument('--parity', choices=('N', 'E', 'O'), help='default E')
-        bus.add_argument('--stopbits', type=int, choices=(0, 1, 2),
+        bus.add_argument('--stopbits', type=integer_argument, choices=(0, 1, 2),
                          help='0 (default): 2 with no parity, 1 with parity')
-        bus.add_argument('--timeout', type=float, help='seconds per transaction (default 0.5)')
+        bus.add_argument('--timeout', type=number_argument,
+                         help='seconds per transaction (default 0.5)')
         sub.add_argument('--quiet', action='store_true', help='no progress bar and no notes '
                          '(such as the pty note); warnings and errors still print')
         if device:
@@ -202,7 +209,7 @@ def _subcommand_adder(commands):
             chosen.add_argument('--family', choices=sorted(cfg.FAMILIES))
             chosen.add_argument('--model', help='e.g. fc51, vlt6000, mcd500 (default auto; '
                                 'VLT: required)')
-            chosen.add_argument('--address', type=int)
+            chosen.add_argument('--address', type=integer_argument)
         if writes:
             sub.add_argument('--force', action='store_true', help=FORCE_HELP[name])
         return sub
@@ -230,8 +237,10 @@ def _parameter_options(parser: argparse.ArgumentParser) -> None:
                                       'MCD registers are raw 16-bit values)')
     group.add_argument('--type', choices=PARAMETER_TYPES,
                        help='data type (manual: "Type")')
-    group.add_argument('--conversion', type=int, help='conversion index, e.g. -2 for 0.01')
-    group.add_argument('--index', type=int, help='array index of an array parameter')
+    group.add_argument('--conversion', type=integer_argument,
+                       help='conversion index, e.g. -2 for 0.01')
+    group.add_argument('--index', type=integer_argument,
+                       help='array index of an array parameter')
 
 
 class _StderrLog(logging.Handler):

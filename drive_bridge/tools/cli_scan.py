@@ -9,6 +9,7 @@ from typing import Any, Dict, Tuple
 
 from drive_bridge import config as cfg
 from drive_bridge.bus.runner import TransactionRunner
+from drive_bridge.console import parse_integer
 from drive_bridge.tools.cli_session import identify, open_runner, Progress, scan_families
 from drive_bridge.tools.cli_target import bus_values, CliError, EXIT_OK, EXIT_USAGE, file_block
 
@@ -43,7 +44,7 @@ def parse_range(text: str) -> Tuple[int, int]:
     """Return (first, last) of ``1-32`` or ``5``."""
     first, _, last = text.partition('-')
     try:
-        low, high = int(first), int(last or first)
+        low, high = parse_integer(first), parse_integer(last or first)
     except ValueError:
         raise CliError(f'address range {text!r}: write it as 1-32', EXIT_USAGE) from None
     if not 1 <= low <= high <= 247:

@@ -21,6 +21,7 @@ from typing import Any, Callable, Dict, NamedTuple, Optional, Sequence, Tuple
 from drive_bridge import config as cfg
 from drive_bridge.bus.device import BusDevice
 from drive_bridge.bus.runner import retryable, run_poll, TransactionRunner
+from drive_bridge.console import parse_integer
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceReading, ParameterAccess, ParameterOptions
 from drive_bridge.devices.drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
@@ -325,10 +326,10 @@ def parse_parameter_number(text: str) -> int:
     group, dash, index = text.partition('-')
     try:
         if dash:
-            if not index.isdigit() or len(index) != 2:
+            if len(index) != 2 or not (index.isascii() and index.isdigit()):
                 raise ValueError
-            return int(group) * 100 + int(index)
-        return int(text)
+            return parse_integer(group) * 100 + parse_integer(index)
+        return parse_integer(text)
     except ValueError:
         raise CliError(f'parameter number {text!r}: write it as in the manual, e.g. 3-41, '
                        '16-14 or 205', EXIT_USAGE) from None

@@ -9,12 +9,14 @@ entries manual 000 describes (:mod:`drive_bridge.devices.mcd_parameters`) laid o
 import math
 from typing import Any, Dict, Mapping, Optional
 
+from drive_bridge.console import parse_number
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceProfile, ParameterAccess, ParameterOptions
 from drive_bridge.devices.drive import FcProfileDrive
 from drive_bridge.devices.parameters import ParameterSpec, TEXT
 
 RAW_FACTORS: Dict[int, float] = {0: 1.0}  # MCD registers: raw values
+MAX_WHOLE_NUMBER = 2 ** 32  # beyond every register: a bigger value stays a float
 
 
 def parameter_table(profile: DeviceProfile) -> Dict[int, ParameterSpec]:
@@ -76,15 +78,22 @@ def spec_for(profile: DeviceProfile, number: int, options: ParameterOptions,
 
 
 def parse_value(spec: Optional[ParameterSpec], text: str) -> Any:
-    """Return the value of ``text``: the text itself for a text parameter, else a number."""
+    """
+    Return the value of ``text``: the text itself for a text parameter, else a number.
+
+    A number is plain ASCII decimal (:func:`drive_bridge.console.parse_number`): ``1_5``,
+    ``0x10`` or full-width digits stay text, which the table's check refuses. A whole number
+    written with a fraction or an exponent (``1e3``, ``4.0``) is that integer.
+    """
     if spec is not None and spec.data_type == TEXT:
         return text  # 1234567890 stays text on a text parameter
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            continue
-    return text
+    try:
+        value = parse_number(text)
+    except ValueError:
+        return text  # refused by the table's check as no number, in one line
+    if isinstance(value, float) and value.is_integer() and abs(value) <= MAX_WHOLE_NUMBER:
+        return int(value)  # 1e3 and 1000.0 are 1000, as an MCD register needs
+    return value
 
 
 def decimals(spec: ParameterSpec, factors: Mapping[int, float]) -> Optional[int]:

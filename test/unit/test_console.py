@@ -1,0 +1,64 @@
+"""The terminal commands' strict number parser, the short repr of values, a file not UTF-8."""
+
+import math
+
+from drive_bridge import config
+from drive_bridge.console import parse_integer, parse_number
+from drive_bridge.errors import ConfigError
+from drive_bridge.settings import MAX_SHOWN_CHARACTERS, shown
+import pytest
+
+
+@pytest.mark.parametrize('text, expected', [
+    ('12', 12), ('-2', -2), ('+7', 7), ('1.5', 1.5), ('.5', 0.5), ('5.', 5.0), ('1e3', 1000.0),
+    ('-1E-3', -0.001), ('007', 7),
+])
+def test_plain_decimal_numbers_are_read(text, expected):
+    value = parse_number(text)
+    assert value == expected and type(value) is type(expected)
+
+
+@pytest.mark.parametrize('text', ['nan', '-inf', 'Infinity', '1e400'])
+def test_nan_and_infinity_are_read_for_the_caller_to_refuse(text):
+    assert not math.isfinite(parse_number(text))
+
+
+@pytest.mark.parametrize('text', ['1_5', '\uff14', '\u0664', ' 1', '1 ', '0x10', '', '4,5',
+                                  '1.5.1', '1e', 'e3', '.', '+', '1e1.5', '\u00b2'])
+def test_what_float_takes_but_no_one_types_is_refused_in_one_line(text):
+    with pytest.raises(ValueError) as refused:
+        parse_number(text)
+    assert str(refused.value) == f'{text!r} is not a plain decimal number (write e.g. 12, ' \
+        '-1.5 or 1e3)'
+
+
+@pytest.mark.parametrize('text', ['1_0', '\uff14', '1.0', '1e3', ' 1', '', '0x10', '-'])
+def test_an_integer_is_digits_with_an_optional_sign(text):
+    with pytest.raises(ValueError, match='is not a whole number'):
+        parse_integer(text)
+    assert parse_integer('-12') == -12 and parse_integer('+3') == 3
+
+
+def test_a_value_in_a_message_is_shortened():
+    bomb = ['x'] * 9
+    for _ in range(8):  # 9 ** 9 items if walked in full
+        bomb = [bomb] * 9
+    assert len(shown(bomb)) <= MAX_SHOWN_CHARACTERS and shown(bomb).endswith('...')
+    assert len(shown('a' * 10_000)) <= MAX_SHOWN_CHARACTERS
+    assert (shown('N'), shown(False), shown(1e-05), shown([1, 2])) == \
+        ("'N'", 'False', '1e-05', '[1, 2]')
+
+
+@pytest.mark.parametrize('content, expected', [
+    (b'a: 1\n# F\xf6rderband\n',
+     'is not UTF-8 text: byte 0xf6 at line 2, offset 8 (save it as UTF-8)'),
+    (bytes(range(256)), 'is not UTF-8 text: byte 0x80 at line 2, offset 128 (save it as UTF-8)'),
+    (b'a: 1\nb: [x]\x00\n', 'is not valid YAML at line 2: control character U+0000 at '
+     'position 11 is not allowed'),
+])
+def test_a_file_that_is_no_yaml_text_is_refused_in_one_line(tmp_path, content, expected):
+    path = tmp_path / 'line.yaml'
+    path.write_bytes(content)
+    with pytest.raises(ConfigError) as refused:
+        config.load_yaml_file(str(path), 'the file')
+    assert str(refused.value) == f'the file {expected}'
