@@ -16,6 +16,7 @@ import signal
 import time
 from typing import Dict, List, Tuple
 
+from drive_bridge.sim.faults import FaultPlan
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import SetParameters
@@ -65,7 +66,7 @@ def settled_moving(probe, timeout_s: float = 5.0) -> bool:
 
 
 # -- a start and a stop in one gap ----------------------------------------------------------
-@pytest.mark.parametrize('family', ['mcd', 'fc'])
+@pytest.mark.parametrize('family', ['mcd', 'fc', 'lvsg'])
 def test_stop_queued_behind_a_start_in_the_same_gap_wins(family, tmp_path):
     """
     A start, then a stop, both waiting while a poll holds the bus: the motor ends still.
@@ -181,7 +182,7 @@ def test_start_stop_storm_from_three_clients_ends_as_the_last_success(tmp_path):
 
 
 # -- allow_control switched off ---------------------------------------------------------------
-@pytest.mark.parametrize('family', ['mcd', 'fc'])
+@pytest.mark.parametrize('family', ['mcd', 'fc', 'lvsg'])
 def test_monitor_only_set_while_a_start_waits_for_the_bus(family, tmp_path):
     """
     A start waits behind a held poll; allow_control false comes meanwhile.
@@ -259,7 +260,7 @@ def test_monitor_only_during_a_joint_command_stream_that_turns_nonzero(tmp_path)
 
 # -- endings with a start in flight -----------------------------------------------------------
 @pytest.mark.parametrize('lost', [False, True], ids=['late', 'lost'])
-@pytest.mark.parametrize('family', ['mcd', 'fc'])
+@pytest.mark.parametrize('family', ['mcd', 'fc', 'lvsg'])
 def test_lifecycle_shutdown_with_a_start_in_flight_stops_the_motor(family, lost, tmp_path):
     """The lifecycle 'shutdown' transition while a start is on the wire: the motor ends still."""
     rig = make_rig(family)
@@ -306,6 +307,33 @@ def test_two_quick_ctrl_c_with_a_lost_start_in_flight_stop_the_motor(family, tmp
     print(f'{family}: exit {code} after {session.exit_s:.2f} s')
     assert clean_exit(code, output), output
     assert rig.probe.start_edges() == 1, 'the start whose reply was lost was repeated'
+    assert wait_for(rig.probe.stopped, 5.0), 'the motor was left running'
+
+
+@pytest.mark.parametrize('round_', range(4))
+@pytest.mark.parametrize('family', ['mcd', 'fc'])
+def test_exit_signal_right_after_a_start_call_on_a_slow_bus_ends_stopped(family, round_,
+                                                                         tmp_path):
+    """
+    A start call, then SIGTERM or SIGINT 0-50 ms later, every reply 0.1 s late: ends still.
+
+    The start may be in the node, queued for the bus or on the wire when the signal comes;
+    whichever, the motor ends stopped (or never started) and got at most one start.
+    """
+    chance = random.Random(round_)
+    number = (signal.SIGTERM, signal.SIGINT)[round_ % 2]
+    rig = make_rig(family)
+    with Session(rig, tmp_path / 'quick_signal.yaml') as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        rig.server.faults.set_plan(FaultPlan(rate=1.0, kinds=('slow',), slow_s=0.1))
+        start = call_later(client, rig.name, 'start')
+        client.spin_until(start.done, chance.uniform(0.0, 0.05))
+        code, output = session.signal(number)
+    print(f'{family} {signal.Signals(number).name}: exit {code} after {session.exit_s:.2f} s;'
+          f' starts at the device: {rig.probe.start_edges()}')
+    assert clean_exit(code, output), output
+    assert rig.probe.start_edges() <= 1
     assert wait_for(rig.probe.stopped, 5.0), 'the motor was left running'
 
 
@@ -375,6 +403,122 @@ def test_starter_stopped_locally_during_an_outage_is_not_restarted(tmp_path):
         assert more_frames(rig, 30)
         assert probe.commands() == [MCD_START, MCD_STOP], probe.commands()
         assert not probe.moving()
+
+
+def test_auto_start_stream_does_not_restart_a_drive_after_an_outage(tmp_path):
+    """
+    auto_start joint commands keep asking 5 rad/s through an outage: no restart after it.
+
+    The outage ended the run (the drive gets the stop image when it answers again); as
+    after a deactivate or a trip, the automatic start waits for a zero command and a new
+    nonzero one, so the drive stays still until then.
+    """
+    rig = make_rig('fc', velocity_scale=SCALE, command_mode='auto_start')
+    server, probe = rig.server, rig.probe
+    with Session(rig, tmp_path / 'outage_auto.yaml', **OUTAGE_BUS) as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        publisher = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
+        assert client.spin_until(lambda: publisher.get_subscription_count() > 0, 15.0)
+        velocity = [0.0]
+        timer = client.node.create_timer(0.01, lambda: publisher.publish(JointState(
+            name=[rig.name], velocity=[velocity[0]])))
+        client.spin_until(lambda: False, 0.3)  # zero first: arms the automatic start
+        velocity[0] = 5.0
+        assert client.spin_until(probe.moving, 15.0), 'the nonzero command did not start it'
+        with server.lock:
+            server.silent_units.add(probe.unit)
+        assert client.wait_state(rig.name, 'offline', 10.0)
+        with server.lock:
+            server.silent_units.discard(probe.unit)
+            back_at = len(probe.words())
+        assert client.spin_until(lambda: client.state(rig.name) not in ('offline', ''), 15.0)
+        assert client.spin_until(lambda: frames_to(server, probe.unit) > back_at + 40, 20.0)
+        flags = [is_run_word(word) for word in probe.words()[back_at:]]
+        print(f'{len(flags)} control words after the outage, {sum(flags)} run; starts: '
+              f'{probe.start_edges()}')
+        assert not any(flags), 'the stream restarted the drive after the outage'
+        assert probe.start_edges() == 1
+        assert client.spin_until(probe.stopped, 10.0)
+        velocity[0] = 0.0  # zero and back: a new request, it starts
+        client.spin_until(lambda: False, 0.3)
+        velocity[0] = 5.0
+        assert client.spin_until(probe.moving, 15.0)
+        client.node.destroy_timer(timer)
+        assert probe.start_edges() == 2
+
+
+def mcd_start_frames(server, unit: int) -> int:
+    """Return how many recorded writes to ``unit`` carry an MCD start (answered or not)."""
+    count = 0
+    for frame in write_frames(server, unit):
+        if frame[1] == 0x06 and frame[2:6] == bytes([0, 1, 0, MCD_START]):
+            count += 1
+        elif frame[1] == 0x10 and frame[2:4] == bytes([0, 1]) and \
+                frame[7:9] == bytes([0, MCD_START]):
+            count += 1
+    return count
+
+
+@pytest.mark.parametrize('round_', range(3))
+@pytest.mark.parametrize('when', ['offline', 'just_silent'])
+@pytest.mark.parametrize('family', ['mcd', 'fc'])
+def test_start_asked_during_an_outage_as_the_device_comes_back(
+        family, when, round_, tmp_path):
+    """
+    A start asked for in an outage; the device answers again 0-0.6 s later.
+
+    ``offline``: the node knows the device is offline; ``just_silent``: the device has just
+    gone silent, the node does not know yet (the start goes out and gets no reply; the
+    silent device does not execute it). A start answered as failed never reaches the device
+    later, and none is sent twice.
+    """
+    chance = random.Random(10 + round_)
+    rig = make_rig(family)
+    server, probe = rig.server, rig.probe
+    with Session(rig, tmp_path / 'comeback.yaml', **OUTAGE_BUS) as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        with server.lock:
+            server.silent_units.add(probe.unit)
+        if when == 'offline':
+            assert client.wait_state(rig.name, 'offline', 10.0)
+        start = call_later(client, rig.name, 'start')
+        client.spin_until(start.done, chance.uniform(0.0, 0.6))
+        with server.lock:
+            server.silent_units.discard(probe.unit)
+        assert client.spin_until(start.done, 20.0), 'the start was never answered'
+        response = start.result()
+        assert client.spin_until(lambda: client.state(rig.name) not in ('offline', ''), 15.0)
+        assert more_frames(rig, 30)
+        print(f'{family} {when}: start {response.success} {response.message!r}; starts '
+              f'executed by the device: {probe.start_edges()}')
+        if family == 'mcd':
+            assert mcd_start_frames(server, probe.unit) <= 1, 'a start was sent twice'
+        if response.success:
+            assert probe.start_edges() == 1
+        else:
+            assert probe.start_edges() == 0, 'a start answered as failed reached the device'
+            assert probe.run_writes() == 0 and not probe.moving()
+
+
+def test_a_start_refused_as_monitor_only_is_not_sent_when_control_returns(tmp_path):
+    """Monitor-only, start refused, allow_control back to true: still no run image written."""
+    rig = make_rig('fc')
+    with Session(rig, tmp_path / 'control_back.yaml') as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        assert client.set_parameter(f'{rig.name}.allow_control', False).successful
+        refused = client.call(rig.name, 'start')
+        assert not refused.success, refused.message
+        client.publish_reference(rig.name, 40.0)
+        assert client.set_parameter(f'{rig.name}.allow_control', True).successful
+        assert more_frames(rig, 30)
+        assert rig.probe.run_writes() == 0, 'the refused start was sent when control returned'
+        assert not rig.probe.moving()
+        assert client.call(rig.name, 'start').success  # control is back: a new start runs
+        assert wait_for(rig.probe.moving, 10.0)
+        assert rig.probe.start_edges() == 1
 
 
 # -- monitor-only: every input ---------------------------------------------------------------
