@@ -337,6 +337,52 @@ def test_exit_signal_right_after_a_start_call_on_a_slow_bus_ends_stopped(family,
     assert wait_for(rig.probe.stopped, 5.0), 'the motor was left running'
 
 
+FORGETS_A_REFUSED_STOP = (
+    'defect: on_cleanup/on_shutdown (ros/node.py _close_bus -> ros/session.py close -> '
+    'bus/master.py shutdown) close the bus after a failed stop and answer SUCCESS: the run '
+    'the node holds is forgotten, so its death no longer stops the motor it started')
+
+
+@pytest.mark.xfail(strict=True, reason=FORGETS_A_REFUSED_STOP)
+@pytest.mark.parametrize('ending', ['cleanup', 'cleanup_configure_activate', 'shutdown'])
+def test_a_refused_stop_at_cleanup_or_shutdown_does_not_forget_the_motor(ending, tmp_path):
+    """
+    A started starter refuses network commands (Hand On) through deactivate and cleanup.
+
+    Both stops fail (``shutdown``: the lifecycle shutdown from inactive instead of cleanup).
+    The starter then takes network commands again: the motor still runs because of this
+    node, so the node's death (SIGTERM) must stop it, also after the node was configured and
+    activated again (``cleanup_configure_activate``). A node that forgets the run leaves a
+    motor that ROS started and can no longer stop.
+    """
+    rig = make_rig('mcd')
+    server, probe = rig.server, rig.probe
+    with Session(rig, tmp_path / 'cleanup.yaml') as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        assert client.call(rig.name, 'start').success
+        assert client.wait_state(rig.name, 'running', 10.0)
+        with server.lock:
+            probe.model.hand_on = True  # the starter refuses network commands
+        lifecycle = Lifecycle(client)
+        assert lifecycle.transition('deactivate')
+        answered = lifecycle.transition(ending.split('_')[0])
+        print(f'{ending}: answered {answered}; state {lifecycle.state()}')
+        with server.lock:
+            probe.model.hand_on = False  # network control again
+        if ending == 'cleanup_configure_activate' and lifecycle.state() == 'unconfigured':
+            assert lifecycle.transition('configure')
+            assert lifecycle.transition('activate')
+            assert client.wait_state(rig.name, 'running', 15.0)
+        assert probe.moving() and probe.commands() == [MCD_START]
+        code, output = session.signal(signal.SIGTERM)
+    print(f'the starter received {probe.commands()}')
+    assert clean_exit(code, output), output
+    assert wait_for(lambda: not probe.moving(), 5.0), \
+        'the motor started by the node runs on after its death: the node forgot it'
+    assert probe.commands()[-1] == MCD_STOP
+
+
 # -- an outage: the device stops answering, then answers again -------------------------------
 OUTAGE_BUS = {'timeout': 0.2, 'retries': 0, 'offline_after': 2, 'backoff_max': 0.5}
 
