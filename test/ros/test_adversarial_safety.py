@@ -66,10 +66,12 @@ def settled_moving(probe, timeout_s: float = 5.0) -> bool:
 
 
 # -- a start and a stop in one gap ----------------------------------------------------------
-@pytest.mark.parametrize('family', ['mcd', 'fc', 'lvsg'])
-def test_stop_queued_behind_a_start_in_the_same_gap_wins(family, tmp_path):
+@pytest.mark.parametrize('family, stop_kind', [
+    ('mcd', 'stop'), ('fc', 'stop'), ('lvsg', 'stop'), ('mcd', 'quick_stop'),
+    ('fc', 'quick_stop'), ('fc', 'coast_stop'), ('lvsg', 'quick_stop')])
+def test_stop_queued_behind_a_start_in_the_same_gap_wins(family, stop_kind, tmp_path):
     """
-    A start, then a stop, both waiting while a poll holds the bus: the motor ends still.
+    A start, then a stop (``stop_kind``), both waiting while a poll holds the bus: still.
 
     The user asked to stop last. Whatever order the bridge executes them in, the motor's end
     must be the last command answered as succeeded, and that must be the stop: a start that
@@ -85,12 +87,12 @@ def test_stop_queued_behind_a_start_in_the_same_gap_wins(family, tmp_path):
         assert wait_for(hold.seen.is_set, 10.0)  # a poll waits for its reply
         start = call_later(client, rig.name, 'start')
         client.spin_until(lambda: False, 0.2)  # the start reaches the node, the bus is busy
-        stop = call_later(client, rig.name, 'stop')
+        stop = call_later(client, rig.name, stop_kind)
         client.spin_until(lambda: False, 0.2)
         hold.release()
         order = answered_order(client, {'start': start, 'stop': stop})
         answers = {'start': start.result(), 'stop': stop.result()}
-        print(f'{family}: answered {order}: '
+        print(f'{family} {stop_kind}: answered {order}: '
               f'{[(name, answers[name].success, answers[name].message) for name in order]}')
         moving = settled_moving(rig.probe)
         succeeded = [name for name in order if answers[name].success]
@@ -470,6 +472,50 @@ def test_a_refused_stop_at_cleanup_or_shutdown_does_not_forget_the_motor(ending,
     assert wait_for(lambda: not probe.moving(), 5.0), \
         'the motor started by the node runs on after its death: the node forgot it'
     assert probe.commands()[-1] == MCD_STOP
+
+
+@pytest.mark.parametrize('topic', ['speed_reference', 'joint_commands'])
+def test_deadman_stops_the_drive_on_a_slow_bus_when_commands_stop(topic, tmp_path):
+    """
+    reference_timeout 0.5 s, every reply 0.1 s late.
+
+    Commands at 20 Hz keep the drive running; when they stop, a stop word reaches the drive
+    within the timeout and one slow poll cycle (bound: timeout + 1 s), and it is never
+    restarted by the keepalive.
+    """
+    rig = make_rig('fc', velocity_scale=SCALE, reference_timeout=0.5)
+    with Session(rig, tmp_path / 'deadman.yaml') as session:
+        client = session.client
+        probe = rig.probe
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        joints = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
+        assert client.spin_until(lambda: joints.get_subscription_count() > 0, 15.0)
+        last_sent = [0.0]
+
+        def send() -> None:
+            if topic == 'speed_reference':
+                client.publish_reference(rig.name, 30.0)
+            else:
+                joints.publish(JointState(name=[rig.name], velocity=[6.0]))
+            last_sent[0] = time.monotonic()
+
+        timer = client.node.create_timer(0.05, send)
+        assert client.spin_until(lambda: last_sent[0] > 0.0, 5.0)
+        assert client.call(rig.name, 'start').success
+        assert client.spin_until(probe.moving, 10.0)
+        rig.server.faults.set_plan(FaultPlan(rate=1.0, kinds=('slow',), slow_s=0.1))
+        client.spin_until(lambda: False, 1.0)  # running on the slow bus, commands flowing
+        assert not probe.last_write_stops(), 'stopped while commands were flowing'
+        client.node.destroy_timer(timer)
+        stopped_at = last_sent[0]
+        assert client.spin_until(probe.last_write_stops, 5.0), 'the deadman never stopped it'
+        took_s = time.monotonic() - stopped_at
+        print(f'{topic}: a stop word {took_s:.2f} s after the last command')
+        assert took_s < 1.5
+        assert wait_for(probe.stopped, 5.0)
+        runs = probe.run_writes()
+        assert more_frames(rig, 20)
+        assert probe.run_writes() == runs and probe.start_edges() == 1
 
 
 # -- an outage: the device stops answering, then answers again -------------------------------
