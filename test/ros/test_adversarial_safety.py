@@ -629,6 +629,38 @@ def test_auto_start_stream_does_not_restart_a_drive_after_an_outage(tmp_path):
         assert probe.start_edges() == 2
 
 
+def test_auto_start_whose_reply_was_lost_is_not_repeated_by_the_stream(tmp_path):
+    """
+    auto_start: the start a nonzero joint command sends loses its reply; the stream goes on.
+
+    The start may have run, so it is never sent again while the command stays nonzero; the
+    drive ends stopped (a cyclic device's unconfirmed run gets the stop image).
+    """
+    rig = make_rig('fc', velocity_scale=SCALE, command_mode='auto_start')
+    probe = rig.probe
+    hold = ReplyHold(probe, drop=True, wait_release=False)
+    rig.server.reply_hook = hold
+    with Session(rig, tmp_path / 'auto_lost.yaml') as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        publisher = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
+        assert client.spin_until(lambda: publisher.get_subscription_count() > 0, 15.0)
+        velocity = [0.0]
+        timer = client.node.create_timer(0.01, lambda: publisher.publish(JointState(
+            name=[rig.name], velocity=[velocity[0]])))
+        client.spin_until(lambda: False, 0.3)  # zero first: arms the automatic start
+        hold.arm()
+        velocity[0] = 5.0
+        assert client.spin_until(hold.seen.is_set, 10.0), 'the stream sent no start'
+        assert client.spin_until(probe.last_write_stops, 10.0), 'no stop image after it'
+        assert more_frames(rig, 40)
+        client.node.destroy_timer(timer)
+        print(f'starts {probe.start_edges()}, run writes {probe.run_writes()}')
+        assert probe.start_edges() == 1, 'the stream repeated a start whose reply was lost'
+        assert probe.run_writes() == 1
+        assert wait_for(probe.stopped, 10.0)
+
+
 def mcd_start_frames(server, unit: int) -> int:
     """Return how many recorded writes to ``unit`` carry an MCD start (answered or not)."""
     count = 0
