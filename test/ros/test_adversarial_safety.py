@@ -13,6 +13,8 @@ bridge.
 
 import random
 import signal
+import subprocess
+import sys
 import time
 from typing import Dict, List, Tuple
 
@@ -776,6 +778,45 @@ def test_monitor_only_drive_gets_nothing_from_any_input(tmp_path):
     assert clean_exit(code, output), output
     written = write_frames(server, probe.unit)
     assert not written, f'a monitor-only drive got writes: {[f.hex() for f in written]}'
+    assert probe.words() == [] and not probe.moving()
+
+
+def ctl(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess:
+    """Run drive_bridge_ctl to its end, as a user does, for the node /drive_bridge."""
+    return subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl', *args],
+                          capture_output=True, text=True, timeout=timeout_s,
+                          stdin=subprocess.DEVNULL)
+
+
+def test_monitor_only_drive_gets_nothing_from_the_cli(tmp_path):
+    """allow_control false: drive_bridge_ctl calls, references, a stream, params, lifecycle."""
+    rig = make_rig('fc', allow_control=False, speed_reference=0.0)
+    server, probe = rig.server, rig.probe
+    with Session(rig, tmp_path / 'monitor_cli.yaml') as session:
+        assert session.client.wait_state(rig.name, 'ready', READY_S)
+        outcomes = [ctl('call', f'{rig.name}/{command}')
+                    for command in ('start', 'stop', 'coast_stop', 'reset')]
+        outcomes.append(ctl('reference', rig.name, '30'))
+        outcomes.append(ctl('param', 'set', f'{rig.name}.speed_reference', '40'))
+        stream = subprocess.Popen(
+            [sys.executable, '-m', 'drive_bridge.ros.ctl', 'reference', rig.name, '30',
+             '--rate', '50'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        assert more_frames(rig, 20)  # the stream goes on meanwhile
+        stream.send_signal(signal.SIGINT)
+        stream.communicate(timeout=30)
+        outcomes.append(ctl('lifecycle', 'set', 'deactivate'))
+        outcomes.append(ctl('lifecycle', 'set', 'activate'))
+        for outcome in outcomes:
+            print(f'{outcome.args[3:]}: exit {outcome.returncode}: '
+                  f'{(outcome.stdout + outcome.stderr).strip()!r}')
+        assert session.client.wait_state(rig.name, 'ready', 15.0)
+        assert more_frames(rig, 10)
+        code, output = session.signal(signal.SIGTERM)
+    assert clean_exit(code, output), output
+    written = write_frames(server, probe.unit)
+    assert not written, f'the CLI got writes to a monitor-only drive: ' \
+        f'{[f.hex() for f in written]}'
     assert probe.words() == [] and not probe.moving()
 
 
