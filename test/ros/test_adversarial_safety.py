@@ -29,7 +29,8 @@ from safety_helpers import (
     DriveProbe, frames_to, HoldNext, is_run_word, MCD_START, MCD_STOP, recorded, ReplyHold,
     wait_for, write_frames)
 from safety_ros import (
-    call_later, clean_exit, Lifecycle, make_rig, parameter_value, READY_S, Session)
+    call_later, clean_exit, Lifecycle, make_mixed_rig, make_rig, parameter_value, READY_S,
+    Session)
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -104,6 +105,41 @@ def test_stop_queued_behind_a_start_in_the_same_gap_wins(family, stop_kind, tmp_
             f'{succeeded[-1]}'
         assert not moving, 'the start asked first ran after the stop asked last'
         assert rig.probe.start_edges() <= 1
+
+
+@pytest.mark.parametrize('target', ['starter', 'conv', 'mixer'])
+def test_start_and_stop_queued_while_another_device_is_polled(target, tmp_path):
+    """
+    A four-device line: a poll of the fan holds the bus; a start then a stop for ``target``.
+
+    The stop was asked last: the target ends still, with at most one start received; the
+    other devices never got a start.
+    """
+    rig = make_mixed_rig()
+    fan = rig.probes['fan']
+    hold = HoldNext(fan.unit)
+    rig.server.reply_hook = hold
+    with Session(rig, tmp_path / 'other_poll.yaml') as session:
+        client = session.client
+        for name in rig.devices:
+            assert client.wait_state(name, 'ready', READY_S), name
+        hold.arm()
+        assert wait_for(hold.seen.is_set, 10.0)  # the fan's poll waits for its reply
+        start = call_later(client, target, 'start')
+        client.spin_until(lambda: False, 0.1)
+        stop = call_later(client, target, 'stop')
+        client.spin_until(lambda: False, 0.1)
+        hold.release()
+        order = answered_order(client, {'start': start, 'stop': stop})
+        answers = {'start': start.result(), 'stop': stop.result()}
+        print(f'{target}: answered {order}: '
+              f'{[(name, answers[name].success, answers[name].message) for name in order]}')
+        probe = rig.probes[target]
+        assert not settled_moving(probe), 'the start asked first ran after the stop asked last'
+        assert probe.start_edges() <= 1
+        for name, other in rig.probes.items():
+            if name != target:
+                assert other.start_edges() == 0, name
 
 
 def test_start_stop_storm_from_three_clients_ends_as_the_last_success(tmp_path):
