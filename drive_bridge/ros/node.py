@@ -165,14 +165,42 @@ class DriveBridgeNode(LifecycleNode):
         return result
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Close the bus (stopping what may still run) and remove the device interface."""
+        """
+        Close the bus and remove the device interface, once nothing may run because of it.
+
+        A motor whose stop fails (a starter in Hand On refuses it) still runs because of this
+        node: the cleanup is refused and the node stays inactive with the bus open, so that
+        a stop, a later cleanup or the node's end sends the stop again.
+        """
+        if self._may_still_run('cleanup'):
+            return TransitionCallbackReturn.FAILURE
         self._close_bus()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop every motor that may run because of this node, then close the bus."""
-        self._close_bus()
+        """
+        Stop every motor that may run because of this node, then close the bus.
+
+        Where a stop fails the node is finalized with the bus open: it still takes a stop,
+        and its end (SIGTERM, SIGINT) sends the stop again.
+        """
+        if not self._may_still_run('shutdown'):
+            self._close_bus()
         return TransitionCallbackReturn.SUCCESS
+
+    def _may_still_run(self, when: str) -> bool:
+        """Take only stops, stop what may run because of this node; say if any still may."""
+        session = self._session
+        if session is None:
+            return False
+        self._gate.active = False
+        running = session.stop_all(when)
+        if running:
+            then = 'cleanup refused: stop it, then clean up again' if when == 'cleanup' else \
+                'the bus stays open: the node takes a stop, and its end sends one again'
+            self.get_logger().error(f'{when}: {", ".join(running)} may still run because of '
+                                    f'this node (the stop failed); {then}')
+        return bool(running)
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Stop what may run because of this node and close the bus; back to unconfigured."""

@@ -87,9 +87,15 @@ class BusSession:
             for device in self._devices.values():
                 device.publishers.republish()
 
-    def stop_all(self, when: str) -> None:
-        """Stop every motor that may run because of this node; log each outcome."""
+    def stop_all(self, when: str) -> List[str]:
+        """
+        Stop every motor that may run because of this node; log each outcome.
+
+        Returns the devices that may still run because of it: their stop failed (refused,
+        unanswered, no time left), and the bus still holds their run.
+        """
         self._report_stops(self.bus.stop_all(when, STOP_ALL_TIMEOUT_S), when)
+        return [name for name in self.bus.device_names if self.bus.snapshot(name).holds_run]
 
     @contextmanager
     def withdrawn(self) -> Iterator[None]:

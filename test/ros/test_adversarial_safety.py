@@ -466,13 +466,6 @@ def test_two_lifecycle_transitions_at_once_with_a_start_in_flight(family, tmp_pa
     assert rig.probe.start_edges() == 1 and rig.probe.stopped()
 
 
-FORGETS_A_REFUSED_STOP = (
-    'defect: on_cleanup/on_shutdown (ros/node.py _close_bus -> ros/session.py close -> '
-    'bus/master.py shutdown) close the bus after a failed stop and answer SUCCESS: the run '
-    'the node holds is forgotten, so its death no longer stops the motor it started')
-
-
-@pytest.mark.xfail(strict=True, reason=FORGETS_A_REFUSED_STOP)
 @pytest.mark.parametrize('ending', ['cleanup', 'cleanup_configure_activate', 'shutdown'])
 def test_a_refused_stop_at_cleanup_or_shutdown_does_not_forget_the_motor(ending, tmp_path):
     """
