@@ -6,11 +6,14 @@ per configured device, in a loop, under the device's name, and destroys them whe
 the bus. The services are coroutines that submit the command and await the bus's answer
 (:mod:`drive_bridge.ros.service_calls`); ``speed_reference`` only hands the value to the bus.
 Both ask the :class:`~drive_bridge.ros.gate.CommandGate` first, so an inactive node sends
-nothing but stops, and a closed bus nothing at all.
+nothing but stops, and a closed bus nothing at all. A service that is still answering a call
+when the bus closes is destroyed only after that answer went out: rclpy sends the response
+after the coroutine returns, on the executor thread, and a destroyed service cannot send it.
 """
 
 from dataclasses import dataclass
 import functools
+import threading
 import time
 
 from drive_bridge import config as cfg
@@ -57,6 +60,9 @@ class DeviceInterface:
         if cfg.FAMILIES[snapshot.family].reference:
             self._speed_reference = paths.inputs.speed_reference(self.name,
                                                                  self._on_speed_reference)
+        self._lock = threading.Lock()
+        self._calls_in_progress = 0
+        self._closing = False
         self._services = [
             node.create_service(Trigger, f'{self.name}/{command.value}',
                                 functools.partial(self._on_trigger, command),
@@ -72,17 +78,38 @@ class DeviceInterface:
         self.publishers.destroy()
 
     def destroy_endpoints(self) -> None:
-        """Destroy the speed_reference subscription and the services."""
+        """Destroy the speed_reference subscription, and the services once they answered."""
         if self._speed_reference is not None:
             self._paths.inputs.destroy(self._speed_reference)
             self._speed_reference = None
-        for service in self._services:
+        with self._lock:
+            self._closing = True
+            answering = self._calls_in_progress > 0
+        if not answering:
+            self._destroy_services()
+
+    def _destroy_services(self) -> None:
+        with self._lock:
+            services, self._services = self._services, []
+        for service in services:
             self._node.destroy_service(service)
-        self._services = []
+
+    def _call_ended(self) -> None:
+        """Count a call out; the last one of a closed interface has its services destroyed."""
+        with self._lock:
+            self._calls_in_progress -= 1
+            last = self._closing and self._calls_in_progress == 0
+        executor = self._node.executor
+        if last and executor is not None:  # after rclpy sent this call's response
+            executor.create_task(self._destroy_services)
+        elif last:
+            self._destroy_services()
 
     async def _on_trigger(self, command: Command, request: Trigger.Request,
                           response: Trigger.Response) -> Trigger.Response:
         """Send ``command`` and answer once the device acknowledged it or it failed."""
+        with self._lock:
+            self._calls_in_progress += 1
         try:
             response.message = await self._command(command)
             response.success = True
@@ -92,6 +119,8 @@ class DeviceInterface:
             response.success = False
             response.message = f'{command.value} failed: internal error ' \
                 f'{type(error).__name__}: {error}'
+        finally:
+            self._call_ended()
         if response.success:  # one logging call site per severity (rclpy caches them)
             self._logger.info(f'{self.name}/{command.value}: {response.message}')
         else:

@@ -330,14 +330,6 @@ def test_lifecycle_shutdown_with_a_start_in_flight_stops_the_motor(family, lost,
     assert rig.probe.stopped()
 
 
-UNANSWERED_AT_CLOSE = (
-    'defect: ros/node.py _close_bus calls session.close() (which destroys the services, '
-    'ros/device_interface.py destroy_endpoints) before answer_all: the waiting coroutine '
-    'resolves, send_response raises InvalidHandle (printed by ros/process.py spin) and the '
-    'caller never gets an answer')
-
-
-@pytest.mark.xfail(strict=True, reason=UNANSWERED_AT_CLOSE)
 @pytest.mark.parametrize('family', ['mcd', 'fc'])
 def test_a_start_call_in_flight_at_the_lifecycle_shutdown_is_answered(family, tmp_path):
     """
