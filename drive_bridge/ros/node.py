@@ -33,7 +33,8 @@ from drive_bridge.ros.command_inputs import CommandInputs
 from drive_bridge.ros.device_interface import CommandPaths
 from drive_bridge.ros.gate import CommandGate
 from drive_bridge.ros.node_diagnostics import DiagnosticSources, DiagnosticsPublisher
-from drive_bridge.ros.parameters import ParameterDeclarations, RuntimeSettings
+from drive_bridge.ros.parameters import (
+    keep_declared_types, ParameterDeclarations, RuntimeSettings)
 from drive_bridge.ros.service_calls import ServiceCalls
 from drive_bridge.ros.session import BusSession, give_up_s
 from rcl_interfaces.msg import SetParametersResult
@@ -226,6 +227,13 @@ class DriveBridgeNode(LifecycleNode):
         self._calls.answer_all('the bus was closed')
 
     # -- parameters and diagnostics (executor thread) -------------------------------------
+    def set_parameters_atomically(self, parameter_list) -> SetParametersResult:
+        """Set as rclpy does; after a refusal, each parameter keeps its declared type."""
+        result = super().set_parameters_atomically(parameter_list)
+        if not result.successful:
+            keep_declared_types(parameter_list, self)
+        return result
+
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         session = self._session
         return self._settings.on_set(parameters, self._gate.bus,

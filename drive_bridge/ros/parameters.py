@@ -48,8 +48,9 @@ class ParameterDeclarations:
         self._node = node
 
     def node_values(self) -> Dict[str, Any]:
-        """Declare the node's own settings (autostart, ...) and return their values."""
-        return {setting.name: self._declare(setting, setting.name)
+        """Declare the node's own settings (autostart, ...) and return their checked values."""
+        return {setting.name: check_value(setting, self._declare(setting, setting.name),
+                                          setting.name)
                 for setting in cfg.NODE_SETTINGS}
 
     def load_config(self) -> cfg.BridgeConfig:
@@ -133,9 +134,11 @@ def keep_declared_types(parameters: List[Parameter], declared: 'DeclaredParamete
     After a refused change, give each parameter back the type of the value it kept.
 
     The parameters are dynamically typed (:func:`descriptor`), and rclpy writes a value's
-    type into the stored descriptor before the on-set callback may refuse the value: a
-    refused ``'fast'`` for ``poll_rate`` would leave it described as a string parameter, and
-    ``drive_bridge_ctl`` types what it sends as the node describes it.
+    type into the stored descriptor before it or the on-set callback may refuse the value
+    (another parameter of the same atomic change can be the one refused): a refused
+    ``'fast'`` for ``poll_rate`` would leave it described as a string parameter, and
+    ``drive_bridge_ctl`` types what it sends as the node describes it. The node calls this
+    after every refused ``set_parameters_atomically``, which rclpy's parameter services use.
     """
     settings = cfg.all_device_settings()
     for parameter in parameters:
@@ -169,11 +172,8 @@ class RuntimeSettings:
                joints: Optional[TakesJointSettings],
                declared: DeclaredParameters) -> SetParametersResult:
         """Check every change first, then apply them all at once on the bus, or none."""
-        result = self._kept_for_configure(parameters, declared) if bus is None else \
+        return self._kept_for_configure(parameters, declared) if bus is None else \
             self._applied(parameters, bus, joints)
-        if not result.successful:
-            keep_declared_types(parameters, declared)
-        return result
 
     def _applied(self, parameters: List[Parameter], bus: BusMaster,
                  joints: Optional[TakesJointSettings]) -> SetParametersResult:

@@ -299,6 +299,18 @@ def ctl(*args):
                           capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
 
 
+def test_an_atomic_change_refused_for_another_parameter_leaves_the_declared_type(node, sim):
+    """The read-only address is refused by rclpy before the node sees poll_rate's value."""
+    result = set_raw(node, [
+        ('conv.poll_rate', ParameterValue(type=ParameterType.PARAMETER_STRING,
+                                          string_value='fast')),
+        ('conv.address', ParameterValue(type=ParameterType.PARAMETER_INTEGER,
+                                        integer_value=5))], atomic=True)
+    print(f'poll_rate fast + address 5 atomically: {result.successful} {result.reason!r}')
+    assert not result.successful and '\n' not in result.reason
+    assert descriptor_type(node, 'conv.poll_rate') == ParameterType.PARAMETER_DOUBLE
+
+
 def test_a_refused_value_of_the_wrong_type_leaves_the_declared_type(node, sim):
     refused = node.set_parameter('conv.poll_rate', 'fast')
     assert not refused.successful
@@ -503,8 +515,13 @@ HEAD = "/**/drive_bridge:\n  ros__parameters:\n    port: /dev/null\n    parity: 
     (b'# F\xf6rderband\n' + HEAD.encode(), 'the parameters file'),
     (bytes(range(256)), 'the parameters file'),
     (HEAD + '    devices: [a]\x00\n', 'is not valid YAML'),
+    (HEAD + '    allow_runtime_control_enable: "false"\n    devices: [a]\n'
+     '    a: {family: mcd, address: 1}\n',
+     "parameter 'allow_runtime_control_enable' = 'false' has the wrong type"),
+    (HEAD + '    autostart: "no"\n    devices: [a]\n    a: {family: mcd, address: 1}\n',
+     "parameter 'autostart' = 'no' has the wrong type"),
 ], ids=['key twice', 'devices a string', 'device block a list', 'misspelt key', 'nan',
-        'address twice', 'latin-1 comment', 'binary', 'NUL'])
+        'address twice', 'latin-1 comment', 'binary', 'NUL', 'quoted false', 'quoted no'])
 def test_a_bad_parameters_file_stops_the_node_with_one_line(tmp_path, content, expected):
     path = tmp_path / 'params.yaml'
     if isinstance(content, bytes):

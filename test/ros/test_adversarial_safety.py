@@ -299,6 +299,16 @@ def test_monitor_only_during_a_joint_command_stream_that_turns_nonzero(tmp_path)
 
 
 # -- endings with a start in flight -----------------------------------------------------------
+def start_on_the_wire(session, rig, hold):
+    """Arm ``hold`` and call start; return the call once its request reached the device."""
+    client = session.client
+    assert client.wait_state(rig.name, 'ready', READY_S)
+    hold.arm()
+    start = call_later(client, rig.name, 'start')
+    assert client.spin_until(hold.seen.is_set, 15.0), 'the start never reached the device'
+    return start
+
+
 @pytest.mark.parametrize('lost', [False, True], ids=['late', 'lost'])
 @pytest.mark.parametrize('family', ['mcd', 'fc', 'lvsg'])
 def test_lifecycle_shutdown_with_a_start_in_flight_stops_the_motor(family, lost, tmp_path):
@@ -308,10 +318,7 @@ def test_lifecycle_shutdown_with_a_start_in_flight_stops_the_motor(family, lost,
     rig.server.reply_hook = hold
     with Session(rig, tmp_path / 'shutdown.yaml') as session:
         client = session.client
-        assert client.wait_state(rig.name, 'ready', READY_S)
-        hold.arm()
-        start = call_later(client, rig.name, 'start')
-        assert client.spin_until(hold.seen.is_set, 15.0), 'the start never reached the device'
+        start = start_on_the_wire(session, rig, hold)
         lifecycle = Lifecycle(client)
         change = lifecycle.begin('shutdown')
         hold.release()
@@ -343,10 +350,7 @@ def test_a_start_call_in_flight_at_the_lifecycle_shutdown_is_answered(family, tm
     rig.server.reply_hook = hold
     with Session(rig, tmp_path / 'unanswered.yaml') as session:
         client = session.client
-        assert client.wait_state(rig.name, 'ready', READY_S)
-        hold.arm()
-        start = call_later(client, rig.name, 'start')
-        assert client.spin_until(hold.seen.is_set, 15.0), 'the start never reached the device'
+        start = start_on_the_wire(session, rig, hold)
         change = Lifecycle(client).begin('shutdown')
         hold.release()
         assert client.spin_until(change.done, 20.0) and change.result().success
@@ -436,10 +440,7 @@ def test_two_lifecycle_transitions_at_once_with_a_start_in_flight(family, tmp_pa
     rig.server.reply_hook = hold
     with Session(rig, tmp_path / 'two_transitions.yaml') as session:
         client = session.client
-        assert client.wait_state(rig.name, 'ready', READY_S)
-        hold.arm()
-        start = call_later(client, rig.name, 'start')
-        assert client.spin_until(hold.seen.is_set, 15.0), 'the start never reached the device'
+        start = start_on_the_wire(session, rig, hold)
         lifecycle = Lifecycle(client)
         deactivate = lifecycle.begin('deactivate')
         shutdown = lifecycle.begin('shutdown')
@@ -787,19 +788,25 @@ def test_monitor_only_drive_gets_nothing_from_any_input(tmp_path):
                             ('allow_control', False)):
             result = client.set_parameter(f'{rig.name}.{name}', value)
             print(f'{name}={value}: {result.successful} {result.reason!r}')
-        with server.lock:  # the drive trips by itself; a reset call must not be written
-            probe.model.trip(5, server.clock())
-        assert client.wait_state(rig.name, 'tripped', 10.0)
-        assert not client.call(rig.name, 'reset').success
-        lifecycle = Lifecycle(client)
-        assert lifecycle.transition('deactivate')
-        assert lifecycle.transition('activate')
-        assert more_frames(rig, 20)
+        trip_refused_reset_and_lifecycle(session, rig, 5)
         code, output = session.signal(signal.SIGTERM)
     assert clean_exit(code, output), output
     written = write_frames(server, probe.unit)
     assert not written, f'a monitor-only drive got writes: {[f.hex() for f in written]}'
     assert probe.words() == [] and not probe.moving()
+
+
+def trip_refused_reset_and_lifecycle(session, rig, trip_code: int) -> None:
+    """Trip the device by itself, check a reset call is refused; deactivate and activate."""
+    client, server, probe = session.client, rig.server, rig.probe
+    with server.lock:
+        probe.model.trip(trip_code, server.clock())
+    assert client.wait_state(rig.name, 'tripped', 10.0)
+    assert not client.call(rig.name, 'reset').success
+    lifecycle = Lifecycle(client)
+    assert lifecycle.transition('deactivate')
+    assert lifecycle.transition('activate')
+    assert more_frames(rig, 20)
 
 
 def ctl(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess:
@@ -852,14 +859,7 @@ def test_monitor_only_starter_gets_nothing_from_any_input(family, tmp_path):
         for command in ('start', 'stop', 'quick_stop', 'reset'):
             response = client.call(rig.name, command)
             print(f'{command}: {response.success} {response.message!r}')
-        with server.lock:
-            probe.model.trip(3, server.clock())
-        assert client.wait_state(rig.name, 'tripped', 10.0)
-        assert not client.call(rig.name, 'reset').success
-        lifecycle = Lifecycle(client)
-        assert lifecycle.transition('deactivate')
-        assert lifecycle.transition('activate')
-        assert more_frames(rig, 20)
+        trip_refused_reset_and_lifecycle(session, rig, 3)
         code, output = session.signal(signal.SIGTERM)
     assert clean_exit(code, output), output
     written = write_frames(server, probe.unit)

@@ -2,7 +2,7 @@
 
 from typing import Dict, List
 
-from drive_bridge.ros.parameters import RuntimeSettings
+from drive_bridge.ros.parameters import keep_declared_types, RuntimeSettings
 import pytest
 from rclpy.parameter import Parameter
 
@@ -103,16 +103,19 @@ def test_an_integer_for_a_double_is_refused_naming_the_parameter():
 
 def test_a_refused_change_gives_each_runtime_parameter_its_descriptor_back():
     """The stored descriptor was typed as the refused value by rclpy: it is given back."""
-    declared = Declared(MONITOR_ONLY)
-    settings = RuntimeSettings(Logger(), allow_runtime_control_enable=True)
-    assert not set_without_bus(settings, declared, mon__poll_rate='fast').successful
+    declared = Declared({'mon.poll_rate': 20.0, 'port': '/dev/null'})
+    keep_declared_types([Parameter('mon.poll_rate', value='fast'),
+                         Parameter('port', value=3)], declared)
     given_back = declared.descriptors['mon.poll_rate']
     assert given_back.name == 'mon.poll_rate' and given_back.dynamic_typing
     assert not given_back.read_only and given_back.floating_point_range
+    assert list(declared.descriptors) == ['mon.poll_rate']  # bus settings are read-only
 
 
-def test_an_accepted_change_leaves_the_descriptors_alone():
+def test_the_on_set_callback_leaves_the_descriptors_alone():
+    """The node gives the descriptors back after rclpy's whole set (set_parameters_atomically)."""
     declared = Declared(MONITOR_ONLY)
     settings = RuntimeSettings(Logger(), allow_runtime_control_enable=True)
     assert set_without_bus(settings, declared, mon__poll_rate=10.0).successful
+    assert not set_without_bus(settings, declared, mon__poll_rate='fast').successful
     assert declared.descriptors == {}
