@@ -2,9 +2,12 @@
 
 from typing import Dict, List
 
-from drive_bridge.ros.parameters import keep_declared_types, RuntimeSettings
 import pytest
-from rclpy.parameter import Parameter
+
+# rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
+parameters = pytest.importorskip('drive_bridge.ros.parameters', reason='ROS 2 (rclpy) from PyPI')
+Parameter = pytest.importorskip('rclpy.parameter').Parameter
+keep_declared_types, RuntimeSettings = parameters.keep_declared_types, parameters.RuntimeSettings
 
 
 class Logger:
