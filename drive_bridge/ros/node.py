@@ -34,7 +34,7 @@ from drive_bridge.ros.device_interface import CommandPaths
 from drive_bridge.ros.gate import CommandGate
 from drive_bridge.ros.node_diagnostics import DiagnosticSources, DiagnosticsPublisher
 from drive_bridge.ros.parameters import (
-    keep_declared_types, ParameterDeclarations, RuntimeSettings)
+    answer_unknown_types, keep_declared_types, ParameterDeclarations, RuntimeSettings)
 from drive_bridge.ros.service_calls import ServiceCalls
 from drive_bridge.ros.session import BusSession, give_up_s
 from rcl_interfaces.msg import SetParametersResult
@@ -52,6 +52,7 @@ class DriveBridgeNode(LifecycleNode):
         super().__init__(NODE_NAME, **kwargs)
         self._log_handler = logs.attach(self.get_logger())  # the transports' notes
         self._guard_change_state()
+        answer_unknown_types(self)
         self._declarations = ParameterDeclarations(self)
         node_values = self._declarations.node_values()
         self.autostart = bool(node_values['autostart'])

@@ -147,6 +147,55 @@ def keep_declared_types(parameters: List[Parameter], declared: 'DeclaredParamete
             declared.set_descriptor(parameter.name, descriptor(setting, parameter.name))
 
 
+KNOWN_TYPES = frozenset(kind.value for kind in Parameter.Type)
+
+
+def answer_unknown_types(node: Node) -> None:
+    """
+    Make the node's set-parameters services answer a value of no known type.
+
+    rclpy 7.1.6's services build each parameter from its message before anything else, and a
+    type number that does not exist (a hand-built request) raises there: the executor logs
+    it, and the caller waits for an answer that never comes. The services now refuse such a
+    parameter in one line and take the others as rclpy does.
+    """
+    for service in node.services:
+        if service.srv_name.endswith('/set_parameters'):
+            service.callback = _one_by_one(service.callback, service.srv_type)
+        elif service.srv_name.endswith('/set_parameters_atomically'):
+            service.callback = _all_or_none(service.callback)
+
+
+def _type_refused(parameter) -> SetParametersResult:
+    return SetParametersResult(
+        successful=False, reason=f'parameter {parameter.name!r} has type '
+        f'{parameter.value.type}, which does not exist: nothing set')
+
+
+def _one_by_one(callback, srv_type):
+    """Return a SetParameters callback that refuses the parameters of no known type."""
+    def guarded(request, response):
+        for parameter in request.parameters:
+            if parameter.value.type not in KNOWN_TYPES:
+                response.results.append(_type_refused(parameter))
+            else:
+                one = callback(srv_type.Request(parameters=[parameter]), srv_type.Response())
+                response.results.extend(one.results)
+        return response
+    return guarded
+
+
+def _all_or_none(callback):
+    """Return a SetParametersAtomically callback that refuses a change with such a type."""
+    def guarded(request, response):
+        unknown = [p for p in request.parameters if p.value.type not in KNOWN_TYPES]
+        if unknown:
+            response.result = _type_refused(unknown[0])
+            return response
+        return callback(request, response)
+    return guarded
+
+
 class DeclaredParameters(Protocol):
     """The node's parameters as they are before a change (:class:`rclpy.node.Node`)."""
 

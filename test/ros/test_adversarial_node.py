@@ -272,14 +272,15 @@ def test_a_value_of_the_wrong_kind_is_refused_in_one_line(node, sim, value):
     alive_and_serving(node, sim)
 
 
-@defect(
-    "parameter type 42 (no such type): rclpy's parameter service raises ValueError in "
-    'Parameter.from_parameter_msg; the node\'s executor loop logs "[drive_bridge] '
-    'executor: ValueError: 42 is not a valid Parameter.Type" and survives, but the caller'
-    ' is never answered')
 def test_a_parameter_of_no_known_type_is_answered(node, sim):
-    results = set_raw(node, [('conv.poll_rate', ParameterValue(type=42))])
+    results = set_raw(node, [('conv.poll_rate', ParameterValue(type=42)),
+                             ('conv.poll_rate', double(20.0))])
     assert not results[0].successful and '\n' not in results[0].reason
+    assert results[1].successful  # the others of a non-atomic set are taken as before
+    result = set_raw(node, [('conv.poll_rate', double(25.0)),
+                            ('conv.speed_reference', ParameterValue(type=42))], atomic=True)
+    assert not result.successful and "'conv.speed_reference'" in result.reason
+    assert get_values(node, ['conv.poll_rate'])[0].double_value == 20.0
 
 
 def descriptor_type(node, name):
