@@ -13,7 +13,7 @@ monitor-only device into one that takes commands.
 """
 
 import time
-from typing import Any, Dict, List, Mapping, Optional, Protocol
+from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol
 
 from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusMaster
@@ -99,8 +99,7 @@ class ParameterDeclarations:
                 value = node.declare_parameter(label, default, descriptor(setting, label),
                                                ignore_override=as_double).value
             except Exception:  # noqa: B902 - rclpy's range errors: say it our way
-                override = self._overrides().get(label)
-                check_value(setting, getattr(override, 'value', None), label)
+                check_value(setting, getattr(given, 'value', None), label)
                 raise ConfigError(f'parameter {label!r} is refused: allowed '
                                   f'{setting.allowed()}') from None
         return list(value) if isinstance(value, (list, tuple)) else value
@@ -227,10 +226,13 @@ class RuntimeSettings:
     def _applied(self, parameters: List[Parameter], bus: BusMaster,
                  joints: Optional[TakesJointSettings]) -> SetParametersResult:
         """Check every change, then apply them all on the bus and the joints, or none."""
+        def allowed_now(device: str) -> bool:
+            return bus.snapshot(device).allow_control
         try:
-            changes = self._checked(parameters, bus)
-            enabling = [device for device, change in changes.items()
-                        if change.get('allow_control') and not bus.snapshot(device).allow_control]
+            changes = self._checked(
+                parameters, lambda parameter: parameter.name.partition('.')[0] in
+                bus.device_names, allowed_now)
+            enabling = self._enabling(changes, allowed_now)  # before the bus takes them
             if joints is not None:
                 joints.check_settings(changes)
             bus.apply_settings(changes)
@@ -238,7 +240,8 @@ class RuntimeSettings:
                 joints.apply_settings(changes)
         except (ConfigError, CommandRefused) as error:
             return SetParametersResult(successful=False, reason=str(error))
-        self._record(changes, enabling)
+        self._record(changes, enabling, '(allow_control set true): commands and writes are '
+                     'taken from now on')
         return SetParametersResult(successful=True)
 
     def _kept_for_configure(self, parameters: List[Parameter],
@@ -249,31 +252,17 @@ class RuntimeSettings:
         A parameter not declared yet is being declared by the configure itself, from the
         parameters file: the configuration built from them checks those.
         """
-        settings = cfg.all_device_settings()
-        enabling, disabling = [], []
-        for parameter in parameters:
-            device, _, name = parameter.name.partition('.')
-            setting = settings.get(name)
-            if setting is None or not declared.has_parameter(parameter.name):
-                continue
-            try:
-                value = checked_value(setting, parameter)
-            except ConfigError as error:
-                return SetParametersResult(successful=False, reason=str(error))
-            was = declared.get_parameter(parameter.name).value
-            if name == 'allow_control' and value and not was:
-                if not self.allow_runtime_control_enable:
-                    return SetParametersResult(successful=False,
-                                               reason=self._enabling_refused(parameter.name))
-                enabling.append(device)
-            elif name == 'allow_control' and was and not value:
-                disabling.append(device)
-        for device in disabling:
-            self.changes_in_words[device] = 'monitor only since a runtime change at ' + \
-                time.strftime('%Y-%m-%dT%H:%M:%S%z')
-        for device in enabling:
-            self._enabled(device, '(allow_control set true while the node has no bus): '
-                          'commands and writes are taken from the next configure')
+        def allowed_now(device: str) -> bool:
+            return bool(declared.get_parameter(f'{device}.allow_control').value)
+        try:
+            changes = self._checked(
+                parameters, lambda parameter: declared.has_parameter(parameter.name),
+                allowed_now)
+        except ConfigError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        self._record(changes, self._enabling(changes, allowed_now), '(allow_control set true '
+                     'while the node has no bus): commands and writes are taken from the next '
+                     'configure')
         return SetParametersResult(successful=True)
 
     @staticmethod
@@ -283,32 +272,39 @@ class RuntimeSettings:
                 '(allow_runtime_control_enable is false): restart the node with it '
                 'in the parameters file')
 
-    def _enabled(self, device: str, how: str) -> None:
-        """Log and keep that control was switched on for ``device`` at runtime."""
-        stamp = time.strftime('%Y-%m-%dT%H:%M:%S%z')
-        self.changes_in_words[device] = f'control enabled at runtime at {stamp}'
-        self._logger.warning(f'{device}: control ENABLED at runtime {how}')
+    def _checked(self, parameters: List[Parameter], taken: Callable[[Parameter], bool],
+                 allowed_now: Callable[[str], bool]) -> SettingChanges:
+        """
+        Return the runtime changes checked (``taken``: those of a device there is), or raise.
 
-    def _checked(self, parameters: List[Parameter], bus: BusMaster) -> SettingChanges:
+        ``allowed_now`` says whether a device takes commands before the change.
+        """
         settings = cfg.all_device_settings()
         changes: SettingChanges = {}
         for parameter in parameters:
             device, _, name = parameter.name.partition('.')
             setting = settings.get(name)
-            if device not in bus.device_names or setting is None or not setting.runtime:
+            if setting is None or not setting.runtime or not taken(parameter):
                 continue
             value = checked_value(setting, parameter)
-            if name == 'allow_control' and value and not bus.snapshot(device).allow_control \
+            if name == 'allow_control' and value and not allowed_now(device) \
                     and not self.allow_runtime_control_enable:
                 raise ConfigError(self._enabling_refused(parameter.name))
             changes.setdefault(device, {})[name] = value
         return changes
 
-    def _record(self, changes: SettingChanges, enabling: List[str]) -> None:
+    @staticmethod
+    def _enabling(changes: SettingChanges, allowed_now: Callable[[str], bool]) -> List[str]:
+        """Return the devices whose allow_control the changes switch on."""
+        return [device for device, change in changes.items()
+                if change.get('allow_control') and not allowed_now(device)]
+
+    def _record(self, changes: SettingChanges, enabling: List[str], how: str) -> None:
+        """Log and keep for /diagnostics each allow_control the changes set."""
+        stamp = time.strftime('%Y-%m-%dT%H:%M:%S%z')
         for device in enabling:
-            self._enabled(device, '(allow_control set true): commands and writes are taken '
-                          'from now on')
+            self.changes_in_words[device] = f'control enabled at runtime at {stamp}'
+            self._logger.warning(f'{device}: control ENABLED at runtime {how}')
         for device, change in changes.items():
             if change.get('allow_control') is False:
-                self.changes_in_words[device] = 'monitor only since a runtime change at ' + \
-                    time.strftime('%Y-%m-%dT%H:%M:%S%z')
+                self.changes_in_words[device] = f'monitor only since a runtime change at {stamp}'
