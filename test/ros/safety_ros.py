@@ -15,7 +15,7 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from ros_helpers import node_output, RosClient, start_node, write_params
-from safety_helpers import DriveProbe, LvsgProbe, McdProbe, MotorProbe
+from safety_helpers import DriveProbe, LvsgProbe, McdProbe, MotorProbe, wait_for
 from std_srvs.srv import Trigger
 
 NODE = '/drive_bridge'
@@ -228,6 +228,20 @@ def call_later(client: RosClient, name: str, command: str):
     service = client.clients[(name, command)]
     assert service.wait_for_service(timeout_sec=15.0), f'no {name}/{command}'
     return service.call_async(Trigger.Request())
+
+
+def start_behind_a_held_poll(client: RosClient, rig, hold):
+    """
+    Call start while ``hold`` (a HoldNext) keeps a poll of ``rig`` waiting for its reply.
+
+    Returns the call's future once the call has reached the node and waits for the bus.
+    """
+    assert client.wait_state(rig.name, 'ready', READY_S)
+    hold.arm()
+    assert wait_for(hold.seen.is_set, 10.0)  # a poll waits for its reply
+    start = call_later(client, rig.name, 'start')
+    client.spin_until(lambda: False, 0.2)  # the call reaches the node, the bus is busy
+    return start
 
 
 def status_values(status: Optional[DiagnosticStatus]) -> Dict[str, str]:

@@ -30,7 +30,7 @@ from safety_helpers import (
     wait_for, write_frames)
 from safety_ros import (
     call_later, clean_exit, Lifecycle, make_mixed_rig, make_rig, parameter_value, READY_S,
-    Session)
+    Session, start_behind_a_held_poll)
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -68,6 +68,36 @@ def settled_moving(probe, timeout_s: float = 5.0) -> bool:
     return not wait_for(lambda: not probe.moving(), timeout_s)
 
 
+def joint_commands_publisher(client):
+    """Return a publisher of ``~/joint_commands`` once the node's subscription matched it."""
+    publisher = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
+    assert client.spin_until(lambda: publisher.get_subscription_count() > 0, 15.0)
+    return publisher
+
+
+def zero_first_stream(client, rig):
+    """
+    Stream ``rig``'s joint command at 100 Hz, zero for 0.3 s first (arms the automatic start).
+
+    Returns the velocity to send (a one-item list to change) and the stream's timer.
+    """
+    publisher = joint_commands_publisher(client)
+    velocity = [0.0]
+    timer = client.node.create_timer(0.01, lambda: publisher.publish(JointState(
+        name=[rig.name], velocity=[velocity[0]])))
+    client.spin_until(lambda: False, 0.3)
+    return velocity, timer
+
+
+def started_then_in_hand_on(client, rig):
+    """Start the starter through the node, then put it in Hand On: it refuses the network."""
+    assert client.wait_state(rig.name, 'ready', READY_S)
+    assert client.call(rig.name, 'start').success
+    assert client.wait_state(rig.name, 'running', 10.0)
+    with rig.server.lock:
+        rig.probe.model.hand_on = True
+
+
 # -- a start and a stop in one gap ----------------------------------------------------------
 @pytest.mark.parametrize('family, stop_kind', [
     ('mcd', 'stop'), ('fc', 'stop'), ('lvsg', 'stop'), ('mcd', 'quick_stop'),
@@ -85,11 +115,7 @@ def test_stop_queued_behind_a_start_in_the_same_gap_wins(family, stop_kind, tmp_
     rig.server.reply_hook = hold
     with Session(rig, tmp_path / 'gap.yaml') as session:
         client = session.client
-        assert client.wait_state(rig.name, 'ready', READY_S)
-        hold.arm()
-        assert wait_for(hold.seen.is_set, 10.0)  # a poll waits for its reply
-        start = call_later(client, rig.name, 'start')
-        client.spin_until(lambda: False, 0.2)  # the start reaches the node, the bus is busy
+        start = start_behind_a_held_poll(client, rig, hold)
         stop = call_later(client, rig.name, stop_kind)
         client.spin_until(lambda: False, 0.2)
         hold.release()
@@ -272,8 +298,7 @@ def test_monitor_only_during_a_joint_command_stream_that_turns_nonzero(tmp_path)
     with Session(rig, tmp_path / 'stream_monitor.yaml') as session:
         client = session.client
         assert client.wait_state(rig.name, 'ready', READY_S)
-        publisher = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
-        assert client.spin_until(lambda: publisher.get_subscription_count() > 0, 15.0)
+        publisher = joint_commands_publisher(client)
         velocity = [0.0]
         sent = [0]
         timer = client.node.create_timer(0.005, lambda: (publisher.publish(JointState(
@@ -414,11 +439,7 @@ def test_a_refused_stop_at_deactivate_is_remembered_through_activate(tmp_path):
     server, probe = rig.server, rig.probe
     with Session(rig, tmp_path / 'reactivate.yaml') as session:
         client = session.client
-        assert client.wait_state(rig.name, 'ready', READY_S)
-        assert client.call(rig.name, 'start').success
-        assert client.wait_state(rig.name, 'running', 10.0)
-        with server.lock:
-            probe.model.hand_on = True
+        started_then_in_hand_on(client, rig)
         lifecycle = Lifecycle(client)
         assert lifecycle.transition('deactivate')
         with server.lock:
@@ -474,11 +495,7 @@ def test_a_refused_stop_at_cleanup_or_shutdown_does_not_forget_the_motor(ending,
     server, probe = rig.server, rig.probe
     with Session(rig, tmp_path / 'cleanup.yaml') as session:
         client = session.client
-        assert client.wait_state(rig.name, 'ready', READY_S)
-        assert client.call(rig.name, 'start').success
-        assert client.wait_state(rig.name, 'running', 10.0)
-        with server.lock:
-            probe.model.hand_on = True  # the starter refuses network commands
+        started_then_in_hand_on(client, rig)
         lifecycle = Lifecycle(client)
         assert lifecycle.transition('deactivate')
         answered = lifecycle.transition(ending.split('_')[0])
@@ -512,8 +529,7 @@ def test_deadman_stops_the_drive_on_a_slow_bus_when_commands_stop(topic, tmp_pat
         client = session.client
         probe = rig.probe
         assert client.wait_state(rig.name, 'ready', READY_S)
-        joints = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
-        assert client.spin_until(lambda: joints.get_subscription_count() > 0, 15.0)
+        joints = joint_commands_publisher(client)
         last_sent = [0.0]
 
         def send() -> None:
@@ -623,12 +639,7 @@ def test_auto_start_stream_does_not_restart_a_drive_after_an_outage(tmp_path):
     with Session(rig, tmp_path / 'outage_auto.yaml', **OUTAGE_BUS) as session:
         client = session.client
         assert client.wait_state(rig.name, 'ready', READY_S)
-        publisher = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
-        assert client.spin_until(lambda: publisher.get_subscription_count() > 0, 15.0)
-        velocity = [0.0]
-        timer = client.node.create_timer(0.01, lambda: publisher.publish(JointState(
-            name=[rig.name], velocity=[velocity[0]])))
-        client.spin_until(lambda: False, 0.3)  # zero first: arms the automatic start
+        velocity, timer = zero_first_stream(client, rig)
         velocity[0] = 5.0
         assert client.spin_until(probe.moving, 15.0), 'the nonzero command did not start it'
         with server.lock:
@@ -667,12 +678,7 @@ def test_auto_start_whose_reply_was_lost_is_not_repeated_by_the_stream(tmp_path)
     with Session(rig, tmp_path / 'auto_lost.yaml') as session:
         client = session.client
         assert client.wait_state(rig.name, 'ready', READY_S)
-        publisher = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
-        assert client.spin_until(lambda: publisher.get_subscription_count() > 0, 15.0)
-        velocity = [0.0]
-        timer = client.node.create_timer(0.01, lambda: publisher.publish(JointState(
-            name=[rig.name], velocity=[velocity[0]])))
-        client.spin_until(lambda: False, 0.3)  # zero first: arms the automatic start
+        velocity, timer = zero_first_stream(client, rig)
         hold.arm()
         velocity[0] = 5.0
         assert client.spin_until(hold.seen.is_set, 10.0), 'the stream sent no start'
@@ -778,8 +784,7 @@ def test_monitor_only_drive_gets_nothing_from_any_input(tmp_path):
             print(f'{command}: {response.success} {response.message!r}')
             assert not response.success or command in ('stop', 'quick_stop', 'coast_stop'), \
                 command
-        joints = client.node.create_publisher(JointState, '/drive_bridge/joint_commands', 10)
-        assert client.spin_until(lambda: joints.get_subscription_count() > 0, 15.0)
+        joints = joint_commands_publisher(client)
         for index in range(20):
             joints.publish(JointState(name=[rig.name], velocity=[5.0]))
             client.publish_reference(rig.name, 30.0)

@@ -17,7 +17,7 @@ from safety_helpers import (
     CpuHog, frames_to, HoldNext, MCD_START, MCD_STOP, ReplyHold, wait_for)
 from safety_ros import (
     call_later, call_ok, clean_exit, Lifecycle, make_mixed_rig, make_rig, READY_S, Session,
-    sigterm_round)
+    sigterm_round, start_behind_a_held_poll)
 
 FAMILIES = ('mcd', 'fc', 'lvsg')
 ROUNDS = 5
@@ -97,11 +97,7 @@ def test_start_queued_behind_a_slow_poll_ends_stopped(family, ending, tmp_path):
     rig.server.reply_hook = hold
     with Session(rig, tmp_path / 'queued.yaml') as session:
         client = session.client
-        assert client.wait_state(rig.name, 'ready', READY_S)
-        hold.arm()
-        assert wait_for(hold.seen.is_set, 10.0)  # a poll waits for its reply
-        start = call_later(client, rig.name, 'start')
-        client.spin_until(lambda: False, 0.2)  # the call reaches the node, the bus is busy
+        start = start_behind_a_held_poll(client, rig, hold)
         if ending == 'deactivate':
             change = Lifecycle(client).begin('deactivate')
             hold.release()
