@@ -16,17 +16,32 @@ Their exit when the reader of their output goes (``drive-bridge monitor ... | he
 :data:`EXIT_BROKEN_PIPE` and nothing on stderr, and points its stdout at /dev/null first, so
 that Python's flush at exit raises nothing either (Python's note on SIGPIPE, in the
 ``signal`` module's documentation).
+
+A command line they cannot take is refused in one line on stderr, with exit status
+:data:`EXIT_USAGE` (:class:`OneLineParser`): argparse's own refusal prints the usage first,
+several lines for the commands with many options, and the reason last.
 """
 
+import argparse
 import os
 import re
 import sys
 from typing import Union
 
 EXIT_BROKEN_PIPE = 141  # the reader of stdout went away: as a program SIGPIPE ended
+EXIT_USAGE = 2  # the command line was refused (argparse's status)
 _INTEGER = re.compile(r'[+-]?[0-9]+')
 _NUMBER = re.compile(r'[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?')
 _NOT_FINITE = re.compile(r'[+-]?(nan|inf|infinity)', re.IGNORECASE)
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser that refuses a command line in one line, without the usage."""
+
+    def error(self, message: str):
+        """Print why on one line (and where help is), then exit with :data:`EXIT_USAGE`."""
+        reason = ' '.join(message.split())
+        self.exit(EXIT_USAGE, f'{self.prog}: error: {reason} (see {self.prog} --help)\n')
 
 
 def parse_integer(text: str) -> int:

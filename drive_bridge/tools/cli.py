@@ -35,7 +35,7 @@ from typing import List, Optional
 
 from drive_bridge import config as cfg
 from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE, integer_argument, \
-    number_argument, parse_integer, parse_number
+    number_argument, OneLineParser, parse_integer, parse_number
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError, ModelMismatch
 from drive_bridge.tools.cli_backup import command_backup, command_restore
 from drive_bridge.tools.cli_parameter import command_get, command_set
@@ -120,7 +120,7 @@ SUBCOMMANDS = {
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``drive-bridge``."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='drive-bridge', description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog='examples:\n' + '\n'.join(f'  {EXAMPLES[name]}' for name in

@@ -25,6 +25,7 @@ import sys
 from typing import Dict, List, Optional, Tuple
 
 from drive_bridge.bag_metadata import decode_references
+from drive_bridge.console import OneLineParser
 from drive_bridge.extras import MissingDependency, require
 
 PROG = 'drive_bridge_plot'
@@ -235,7 +236,7 @@ def _draw_values(axis, field: str, samples: Samples, end_s: float) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split(
+    parser = OneLineParser(prog=PROG, description=__doc__.split(
         '\n\n')[1].split('. ')[0].replace('``', '') + '.')
     parser.add_argument('recording', help='bag directory (or a file in it)')
     parser.add_argument('output', help='PNG file to write')

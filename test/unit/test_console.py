@@ -1,4 +1,4 @@
-"""The terminal commands' strict number parser, the short repr of values, a file not UTF-8."""
+"""The terminal commands: strict numbers, one-line refusals; the short repr of values; files."""
 
 import math
 
@@ -62,3 +62,33 @@ def test_a_file_that_is_no_yaml_text_is_refused_in_one_line(tmp_path, content, e
     with pytest.raises(ConfigError) as refused:
         config.load_yaml_file(str(path), 'the file')
     assert str(refused.value) == f'the file {expected}'
+
+
+def _parser_of(module_name: str):
+    """Return the argument parser of one of the package's terminal commands."""
+    if module_name == 'drive_bridge.ros.record':
+        pytest.importorskip('rclpy')
+    module = __import__(module_name, fromlist=['build_parser'])
+    return module.build_parser()
+
+
+@pytest.mark.parametrize('module_name, argv, reason', [
+    ('drive_bridge.tools.cli', ['status', '--bogus'], 'unrecognized arguments: --bogus'),
+    ('drive_bridge.tools.cli', ['set', '3-41'], 'the following arguments are required: value'),
+    ('drive_bridge.tools.cli', ['frobnicate'], "invalid choice: 'frobnicate'"),
+    ('drive_bridge.tools.cli', [], 'the following arguments are required: COMMAND'),
+    ('drive_bridge.sim.cli', ['--nope'], 'unrecognized arguments: --nope'),
+    ('drive_bridge.tools.plot_recording', [], 'the following arguments are required'),
+    ('drive_bridge.ros.record', ['--zz'], 'unrecognized arguments: --zz'),
+])
+def test_a_refused_command_line_is_one_line_and_exit_status_2(module_name, argv, reason,
+                                                              capsys):
+    parser = _parser_of(module_name)
+    with pytest.raises(SystemExit) as exited:
+        parser.parse_args(argv)
+    captured = capsys.readouterr()
+    assert exited.value.code == 2 and captured.out == ''
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    assert reason in lines[0] and lines[0].endswith('--help)'), lines[0]
+    assert 'usage:' not in captured.err
