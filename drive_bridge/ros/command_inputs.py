@@ -59,10 +59,15 @@ class CommandInputs:
         self._thread: Optional[CommandsThread] = None
 
     def speed_reference(self, device: str,
-                        callback: Callable[[Float32], None]) -> Subscription:
-        """Subscribe ``<device>/speed_reference`` (percent of the drive's reference)."""
+                        callback: Callable[[bytes], None]) -> Subscription:
+        """
+        Subscribe ``<device>/speed_reference`` (percent of the drive's reference), serialized.
+
+        ``callback`` gets each message as its CDR bytes (:mod:`drive_bridge.ros.cdr` reads
+        them), so that bytes that are no Float32 get a reason instead of rclpy's silence.
+        """
         return self._subscribe(Float32, f'{device}/speed_reference', callback,
-                               SPEED_REFERENCE_DEPTH)
+                               SPEED_REFERENCE_DEPTH, raw=True)
 
     def joint_commands(self, callback: Callable[[bytes], None]) -> Subscription:
         """

@@ -22,12 +22,14 @@ from drive_bridge.bus.master import DeviceSnapshot
 from drive_bridge.errors import CommandRefused, DriveBridgeError
 from drive_bridge.protocol.commands import Command
 from drive_bridge.ros.bus_events import publish_event
+from drive_bridge.ros.cdr import MalformedMessage, read_float32
 from drive_bridge.ros.command_inputs import CommandInputs
 from drive_bridge.ros.gate import CommandGate
 from drive_bridge.ros.publishers import DevicePublishers
 from drive_bridge.ros.service_calls import ServiceCalls
 from drive_bridge.ros.throttle import Throttle
 from rclpy.lifecycle import LifecycleNode
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float32
 from std_srvs.srv import Trigger
 
@@ -57,6 +59,7 @@ class DeviceInterface:
         self.publishers = DevicePublishers(node, self.name, snapshot.reading_fields)
         self.publishers.publish_state('unknown')
         self._speed_reference = None
+        self._deserialize = functools.partial(deserialize_message, message_type=Float32)
         if cfg.FAMILIES[snapshot.family].reference:
             self._speed_reference = paths.inputs.speed_reference(self.name,
                                                                  self._on_speed_reference)
@@ -135,8 +138,15 @@ class DeviceInterface:
             raise CommandRefused(f'{gate.inactive_reason()} ({future.exception()})')
         return await self._paths.calls.answer_of(future, command.value, self._paths.give_up_s)
 
-    def _on_speed_reference(self, message: Float32) -> None:
+    def _on_speed_reference(self, data: bytes) -> None:
         """Hand the reference to the bus (the commands thread); a refusal is logged throttled."""
+        try:
+            percent = read_float32(data, self._deserialize)
+        except MalformedMessage as error:
+            reason = str(error)
+            self._warn('malformed', lambda: f'{self.name}/speed_reference: not a '
+                       f'std_msgs/Float32 ({reason}): ignored, nothing sent')
+            return
         gate = self._paths.gate
         bus = gate.bus
         if not gate.active or bus is None:
@@ -144,7 +154,7 @@ class DeviceInterface:
                        f'{gate.inactive_reason()}')
             return
         try:
-            bus.set_speed_reference(self.name, message.data, from_topic=True)
+            bus.set_speed_reference(self.name, percent, from_topic=True)
         except CommandRefused as error:
             reason = str(error)
             self._warn('refused', lambda: f'{self.name}/speed_reference: {reason}')

@@ -22,12 +22,12 @@ from dataclasses import dataclass
 import struct
 from typing import Callable, Optional, Sequence, Tuple
 
-ENCAPSULATIONS = {b'\x00\x01': '<', b'\x00\x00': '>'}  # CDR little- and big-endian
-HEADER_BYTES = 4
+from drive_bridge.ros.cdr import ENCAPSULATIONS, HEADER_BYTES, MalformedMessage
+
 MAX_NAME_BYTES = 4096  # a longer joint name is not a joint name (and not a 1 GB allocation)
 
 
-class MalformedCommand(ValueError):
+class MalformedCommand(MalformedMessage):
     """The bytes are not a whole serialized JointState."""
 
 
