@@ -122,3 +122,16 @@ def test_the_on_set_callback_leaves_the_descriptors_alone():
     assert set_without_bus(settings, declared, mon__poll_rate=10.0).successful
     assert not set_without_bus(settings, declared, mon__poll_rate='fast').successful
     assert declared.descriptors == {}
+
+
+@pytest.mark.parametrize('values, note', [
+    ([False, True], None),  # the last value counts, as rclpy sets them: still in control
+    ([True, False], 'monitor only since a runtime change'),
+])
+def test_one_allow_control_named_twice_in_one_change_is_noted_by_its_last_value(values, note):
+    settings = RuntimeSettings(Logger(), allow_runtime_control_enable=False)
+    declared = Declared({'mon.allow_control': True})
+    parameters = [Parameter('mon.allow_control', value=value) for value in values]
+    assert settings.on_set(parameters, None, None, declared).successful
+    assert settings.changes_in_words.get('mon', '').startswith(note or '') and \
+        (note is not None) == ('mon' in settings.changes_in_words)
