@@ -152,7 +152,7 @@ def restore_checked(session: Session, backup, args, out) -> None:
                                         session.manual_number)
     if reasons:
         refuse_restore(backup, session.name, reasons, len(backup.entries))
-    values = backup.values()
+    values = {number: info.whole_number(value) for number, value in backup.values().items()}
     write_all(session, values, ParameterOptions(eeprom=args.eeprom), args, out)
     try:
         verify = read_all(session, list(values), 'verifying', args, out)

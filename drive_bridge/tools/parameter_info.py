@@ -91,8 +91,18 @@ def parse_value(spec: Optional[ParameterSpec], text: str) -> Any:
         value = parse_number(text)
     except ValueError:
         return text  # refused by the table's check as no number, in one line
+    return whole_number(value)
+
+
+def whole_number(value: Any) -> Any:
+    """
+    Return a float that is a whole number (``1e3``, ``1000.0``) as that int; else ``value``.
+
+    An MCD register takes an int only; ``drive-bridge set`` and ``restore`` (a backup's
+    ``1000.0``, as YAML reads it) both write the int.
+    """
     if isinstance(value, float) and value.is_integer() and abs(value) <= MAX_WHOLE_NUMBER:
-        return int(value)  # 1e3 and 1000.0 are 1000, as an MCD register needs
+        return int(value)
     return value
 
 

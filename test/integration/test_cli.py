@@ -332,6 +332,22 @@ def test_backup_restore_round_trip_with_verify(line, tmp_path):
     assert parameters[4] == current_limit['value']
 
 
+def test_an_mcd_value_written_with_a_decimal_point_in_a_backup_restores_as_its_integer(
+        line, tmp_path):
+    # YAML reads 350.0 as a float; an MCD register takes an int, as `set 4 350.0` writes it.
+    path = backup(line, tmp_path, MCD500)
+    saved = yaml.safe_load(path.read_text())
+    current_limit = saved['parameters'][3]
+    assert current_limit['pnu'] == 4 and isinstance(current_limit['value'], int)
+    current_limit['value'] = float(current_limit['value'] + 5)
+    path.write_text(yaml.safe_dump(saved, sort_keys=False))
+    assert f"value: {current_limit['value']!r}" in path.read_text()
+    code, out = run('restore', *bus(line), *MCD500, path)
+    assert code == 0 and '591 parameters restored to mcd500 mcd_20 and verified' in out
+    assert model(line, 20).parameters[4] == current_limit['value']
+    assert type(model(line, 20).parameters[4]) is int
+
+
 def test_drive_round_trip_with_a_text_parameter(line, tmp_path):
     vlt6000 = ['--family', 'vlt', '--model', 'vlt6000', '--address', 6]
     assert run('set', *bus(line), *vlt6000, 533, 'PUMP 7')[0] == 0
