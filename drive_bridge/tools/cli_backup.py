@@ -12,7 +12,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 from drive_bridge.devices.contracts import ParameterOptions
 from drive_bridge.devices.parameters import ParameterSpec
-from drive_bridge.errors import DriveBridgeError
+from drive_bridge.errors import CommandRefused, DriveBridgeError
 from drive_bridge.tools import backup_file, parameter_info as info
 from drive_bridge.tools.cli_session import (
     allow_writes, Interrupted, Progress, run_session, Session, warn, with_session)
@@ -153,7 +153,11 @@ def restore_checked(session: Session, backup, args, out) -> None:
     if reasons:
         refuse_restore(backup, session.name, reasons, len(backup.entries))
     values = {number: info.whole_number(value) for number, value in backup.values().items()}
-    write_all(session, values, ParameterOptions(eeprom=args.eeprom), args, out)
+    options = ParameterOptions(eeprom=args.eeprom)
+    reasons = unwritable(session, profile, values, options)
+    if reasons:
+        refuse_restore(backup, session.name, reasons, len(values))
+    write_all(session, values, options, args, out)
     try:
         verify = read_all(session, list(values), 'verifying', args, out)
     except KeyboardInterrupt:
@@ -168,6 +172,23 @@ def restore_checked(session: Session, backup, args, out) -> None:
                        f'{verify[number]!r})')
     print(f'{len(values)} parameters restored to {profile.model} {session.name} and verified',
           file=out)
+
+
+def unwritable(session: Session, profile, values: Dict[int, Any],
+               options: ParameterOptions) -> List[str]:
+    """
+    Return one line per value whose write the device's profile refuses (none: all fit).
+
+    The writes are built, not sent: what the table's check let through but the profile
+    would refuse at its write (after the entries before it were written) is found first.
+    """
+    reasons = []
+    for number, value in values.items():
+        try:
+            profile.parameter_plan(number, value, options)
+        except CommandRefused as error:
+            reasons.append(f'{session.manual_number(number)}: {error}')
+    return reasons
 
 
 def write_all(session: Session, values: Dict[int, Any], options: ParameterOptions, args,

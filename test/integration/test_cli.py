@@ -348,6 +348,22 @@ def test_an_mcd_value_written_with_a_decimal_point_in_a_backup_restores_as_its_i
     assert type(model(line, 20).parameters[4]) is int
 
 
+def test_a_value_the_profile_would_refuse_at_its_write_is_found_before_anything_is_written(
+        line, tmp_path, capsys, monkeypatch):
+    # Without the integer of 355.0 (as before), the table's check lets it through and the
+    # MCD profile refuses its write: the whole file is refused first, nothing written.
+    monkeypatch.setattr('drive_bridge.tools.parameter_info.whole_number', lambda value: value)
+    path = edited(backup(line, tmp_path, MCD500), lambda content: content['parameters'][3]
+                  .update(value=float(content['parameters'][3]['value'] + 5)))
+    before = dict(model(line, 20).parameters)
+    line.stats.frames.clear()
+    code, _ = run('restore', *bus(line), *MCD500, path)
+    error = capsys.readouterr().err
+    assert code == 2 and 'nothing written to mcd_20: 1 of 591 entries' in error, error
+    assert '1-4: value ' in error and 'does not fit a 16-bit register' in error, error
+    assert model(line, 20).parameters == before and not writes_to(line, 20)
+
+
 def test_drive_round_trip_with_a_text_parameter(line, tmp_path):
     vlt6000 = ['--family', 'vlt', '--model', 'vlt6000', '--address', 6]
     assert run('set', *bus(line), *vlt6000, 533, 'PUMP 7')[0] == 0
