@@ -41,11 +41,6 @@ DEVICES = {
 }
 
 
-def defect(reason: str):
-    """Mark a test that shows a product defect: it must fail, by an assertion, for ``reason``."""
-    return pytest.mark.xfail(strict=True, raises=AssertionError, reason=reason)
-
-
 WRITE_FUNCTIONS = (0x05, 0x06, 0x0F, 0x10)
 REFERENCE_10_PCT = 0x0666  # 2 rad/s on conv
 REFERENCE_15_PCT = 0x0999  # 3 rad/s on conv
@@ -201,10 +196,16 @@ def test_bytes_that_are_no_float32_on_speed_reference_get_a_reason(node, conv_ho
     before = len(reference_log_lines(node))
     rejected = counter(node, 'conv', 'rejected_references')
     node.raw_reference.publish(NOT_A_FLOAT32['header only, no float'])
-    said = node.spin_until(lambda: len(reference_log_lines(node)) > before or
-                           counter(node, 'conv', 'rejected_references') > rejected, 3.0)
+
+    def reasons():
+        return [line for line in reference_log_lines(node)[before:]
+                if 'conv/speed_reference: not a std_msgs/Float32 (' in line]
+    said = node.spin_until(lambda: bool(reasons()), 3.0)
     print(reference_log_lines(node)[before:])
     assert said, 'no reason given for bytes that are no Float32'
+    assert '): ignored, nothing sent' in reasons()[0], reasons()[0]
+    # Refused as bytes, not read as a value the bus then refused.
+    assert counter(node, 'conv', 'rejected_references') == rejected
 
 
 # -- JointStates that are whole but say nothing, or say it twice --------------------------
