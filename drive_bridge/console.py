@@ -30,13 +30,33 @@ from typing import Union
 
 EXIT_BROKEN_PIPE = 141  # the reader of stdout went away: as a program SIGPIPE ended
 EXIT_USAGE = 2  # the command line was refused (argparse's status)
+_PARSER_THAT_RAN = '_one_line_parser'  # the namespace's note of the parser that ran last
 _INTEGER = re.compile(r'[+-]?[0-9]+')
 _NUMBER = re.compile(r'[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?')
 _NOT_FINITE = re.compile(r'[+-]?(nan|inf|infinity)', re.IGNORECASE)
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """An argument parser that refuses a command line in one line, without the usage."""
+    """
+    An argument parser that refuses a command line in one line, without the usage.
+
+    An option that the chosen subcommand does not know is refused by that subcommand's
+    parser (``drive-bridge status --bogus``: see ``drive-bridge status --help``), not by the
+    top one, whose help does not list the subcommand's options.
+    """
+
+    def __init__(self, *args, **kwargs):
+        """Make the parser; each parser of a command line marks itself as the one that ran."""
+        super().__init__(*args, **kwargs)
+        self.set_defaults(**{_PARSER_THAT_RAN: self})
+
+    def parse_args(self, args=None, namespace=None):
+        """Parse as argparse does; the parser that ran last refuses what is left over."""
+        parsed, extras = self.parse_known_args(args, namespace)
+        parser = vars(parsed).pop(_PARSER_THAT_RAN, self)
+        if extras:
+            parser.error(f'unrecognized arguments: {" ".join(extras)}')
+        return parsed
 
     def error(self, message: str):
         """Print why on one line (and where help is), then exit with :data:`EXIT_USAGE`."""

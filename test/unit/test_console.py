@@ -73,7 +73,8 @@ def _parser_of(module_name: str):
 
 
 @pytest.mark.parametrize('module_name, argv, reason', [
-    ('drive_bridge.tools.cli', ['status', '--bogus'], 'unrecognized arguments: --bogus'),
+    ('drive_bridge.tools.cli', ['status', '--bogus'],
+     'drive-bridge status: error: unrecognized arguments: --bogus (see drive-bridge status'),
     ('drive_bridge.tools.cli', ['set', '3-41'], 'the following arguments are required: value'),
     ('drive_bridge.tools.cli', ['frobnicate'], "invalid choice: 'frobnicate'"),
     ('drive_bridge.tools.cli', [], 'the following arguments are required: COMMAND'),
@@ -92,3 +93,10 @@ def test_a_refused_command_line_is_one_line_and_exit_status_2(module_name, argv,
     assert len(lines) == 1, captured.err
     assert reason in lines[0] and lines[0].endswith('--help)'), lines[0]
     assert 'usage:' not in captured.err
+
+
+def test_a_parsed_command_line_carries_no_note_of_its_parser():
+    from drive_bridge.tools.cli import build_parser
+    parsed = build_parser().parse_args(['status', '--port', '/dev/null', '--family', 'fc',
+                                        '--address', '1'])
+    assert not any('parser' in key for key in vars(parsed)), vars(parsed)
