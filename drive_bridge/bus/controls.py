@@ -33,6 +33,11 @@ class DeviceControls:
                 deadman.feed(device, self.clock())
         return word
 
+    def count_rejected_reference(self, name: str) -> None:
+        """Count a reference refused before it became a value (see BusMaster)."""
+        with self.devices.locked():
+            self.devices.known(name).rejected_references += 1
+
     def feed_deadman(self, name: str) -> None:
         """Count a command message for the deadman (reference_timeout_s)."""
         with self.devices.locked():

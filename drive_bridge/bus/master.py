@@ -143,6 +143,10 @@ class BusMaster:
         """
         return self._controls.set_speed_reference(name, percent, from_topic)
 
+    def count_rejected_reference(self, name: str) -> None:
+        """Count a speed reference refused before it became a value (bytes that are none)."""
+        self._controls.count_rejected_reference(name)
+
     def feed_deadman(self, name: str) -> None:
         """Count a command message for the deadman (reference_timeout_s)."""
         self._controls.feed_deadman(name)

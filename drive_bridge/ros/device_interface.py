@@ -146,6 +146,9 @@ class DeviceInterface:
             reason = str(error)
             self._warn('malformed', lambda: f'{self.name}/speed_reference: not a '
                        f'std_msgs/Float32 ({reason}): ignored, nothing sent')
+            bus = self._paths.gate.bus
+            if bus is not None:
+                bus.count_rejected_reference(self.name)
             return
         gate = self._paths.gate
         bus = gate.bus

@@ -172,11 +172,12 @@ def test_bytes_that_are_no_float32_on_speed_reference_send_nothing(
         node, sim, conv_holds_10_pct, label):
     conv = conv_holds_10_pct
     words = len(conv.control_words_received)
-    node.raw_reference.publish(NOT_A_FLOAT32[label])
-    # Then a NaN in good CDR: counted, so the one before has been taken (or dropped) by now.
+    assert node.wait_fresh_diagnostics()
     rejected = counter(node, 'conv', 'rejected_references')
+    node.raw_reference.publish(NOT_A_FLOAT32[label])
+    # Then a NaN in good CDR. Both are counted, in order: the bytes have been taken by now.
     node.raw_reference.publish(GOOD_CDR_NAN)
-    assert node.spin_until(lambda: counter(node, 'conv', 'rejected_references') > rejected)
+    assert node.spin_until(lambda: counter(node, 'conv', 'rejected_references') == rejected + 2)
     assert node.spin_until(lambda: len(conv.control_words_received) > words + 2)  # polls
     assert conv.reference_word == REFERENCE_10_PCT  # nothing of the bytes reached the drive
     assert all(word == conv.control_words_received[0]
@@ -204,8 +205,10 @@ def test_bytes_that_are_no_float32_on_speed_reference_get_a_reason(node, conv_ho
     print(reference_log_lines(node)[before:])
     assert said, 'no reason given for bytes that are no Float32'
     assert '): ignored, nothing sent' in reasons()[0], reasons()[0]
-    # Refused as bytes, not read as a value the bus then refused.
-    assert counter(node, 'conv', 'rejected_references') == rejected
+    # Counted once, as the bus counts the values it refuses.
+    assert node.spin_until(lambda: counter(node, 'conv', 'rejected_references') == rejected + 1)
+    node.spin_until(lambda: False, 0.5)  # two more /diagnostics periods: not counted twice
+    assert counter(node, 'conv', 'rejected_references') == rejected + 1
 
 
 # -- JointStates that are whole but say nothing, or say it twice --------------------------
