@@ -26,7 +26,7 @@ import argparse
 import os
 import re
 import sys
-from typing import Union
+from typing import Any, Optional, Sequence, Union
 
 EXIT_BROKEN_PIPE = 141  # the reader of stdout went away: as a program SIGPIPE ended
 EXIT_USAGE = 2  # the command line was refused (argparse's status)
@@ -45,16 +45,27 @@ class OneLineParser(argparse.ArgumentParser):
     top one, whose help does not list the subcommand's options.
     """
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args: Any, **kwargs: Any):
         """Make the parser; each parser of a command line marks itself as the one that ran."""
         super().__init__(*args, **kwargs)
         self.set_defaults(**{_PARSER_THAT_RAN: self})
 
-    def parse_args(self, args=None, namespace=None):
-        """Parse as argparse does; the parser that ran last refuses what is left over."""
-        parsed, extras = self.parse_known_args(args, namespace)
+    def parse_args(self, args: Optional[Sequence[str]] = None,
+                   namespace: Optional[argparse.Namespace] = None) -> argparse.Namespace:
+        """
+        Parse as argparse does; refuse what is left over in one line.
+
+        Left over after the subcommand: the subcommand refuses it (its help lists its
+        options); before it (``drive-bridge --quiet status``): this parser does.
+        """
+        argv = list(sys.argv[1:] if args is None else args)
+        parsed, extras = self.parse_known_args(argv, namespace)  # subparsers call it too
         parser = vars(parsed).pop(_PARSER_THAT_RAN, self)
         if extras:
+            command = parser.prog.split()[-1]
+            if parser is not self and command in argv and extras[0] in argv \
+                    and argv.index(extras[0]) < argv.index(command):
+                parser = self
             parser.error(f'unrecognized arguments: {" ".join(extras)}')
         return parsed
 

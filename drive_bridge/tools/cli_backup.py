@@ -10,7 +10,7 @@ The file itself (its format and checks) is :mod:`drive_bridge.tools.backup_file`
 import os
 from typing import Any, Dict, List, Optional, Tuple
 
-from drive_bridge.devices.contracts import ParameterOptions
+from drive_bridge.devices.contracts import DeviceProfile, ParameterOptions
 from drive_bridge.devices.parameters import ParameterSpec
 from drive_bridge.errors import CommandRefused, DriveBridgeError
 from drive_bridge.tools import backup_file, parameter_info as info
@@ -21,6 +21,7 @@ from drive_bridge.tools.cli_target import (
 
 
 MAX_REASONS_SHOWN = 20
+EVERY_ENTRY = 'every entry: '  # a refusal of the whole file for one reason
 
 
 def backup_rows(session: Session) -> List[Tuple[int, Optional[ParameterSpec]]]:
@@ -154,7 +155,9 @@ def restore_checked(session: Session, backup, args, out) -> None:
         refuse_restore(backup, session.name, reasons, len(backup.entries))
     values = {number: info.whole_number(value) for number, value in backup.values().items()}
     options = ParameterOptions(eeprom=args.eeprom)
-    reasons = unwritable(session, profile, values, options)
+    reasons = unwritable(session, profile, backup, values, options)
+    if len(reasons) == 1 and reasons[0].startswith(EVERY_ENTRY):
+        refuse_restore(backup, session.name, reasons)
     if reasons:
         refuse_restore(backup, session.name, reasons, len(values))
     write_all(session, values, options, args, out)
@@ -174,21 +177,26 @@ def restore_checked(session: Session, backup, args, out) -> None:
           file=out)
 
 
-def unwritable(session: Session, profile, values: Dict[int, Any],
-               options: ParameterOptions) -> List[str]:
+def unwritable(session: Session, profile: DeviceProfile, backup: backup_file.Backup,
+               values: Dict[int, Any], options: ParameterOptions) -> List[str]:
     """
     Return one line per value whose write the device's profile refuses (none: all fit).
 
     The writes are built, not sent: what the table's check let through but the profile
     would refuse at its write (after the entries before it were written) is found first.
+    A refusal of every entry for one reason (``--eeprom`` on an MCD) is one line.
     """
-    reasons = []
+    positions = {entry.pnu: entry.position for entry in backup.entries}
+    refused: Dict[int, str] = {}
     for number, value in values.items():
         try:
             profile.parameter_plan(number, value, options)
         except CommandRefused as error:
-            reasons.append(f'{session.manual_number(number)}: {error}')
-    return reasons
+            refused[number] = str(error)
+    if len(values) > 1 and len(refused) == len(values) and len(set(refused.values())) == 1:
+        return [f'{EVERY_ENTRY}{next(iter(refused.values()))}']
+    return [f'{session.manual_number(number)} (entry {positions[number]}): {reason}'
+            for number, reason in refused.items()]
 
 
 def write_all(session: Session, values: Dict[int, Any], options: ParameterOptions, args,

@@ -360,7 +360,21 @@ def test_a_value_the_profile_would_refuse_at_its_write_is_found_before_anything_
     code, _ = run('restore', *bus(line), *MCD500, path)
     error = capsys.readouterr().err
     assert code == 2 and 'nothing written to mcd_20: 1 of 591 entries' in error, error
-    assert '1-4: value ' in error and 'does not fit a 16-bit register' in error, error
+    assert '1-4 (entry 4): value ' in error, error
+    assert 'does not fit a 16-bit register' in error, error
+    assert model(line, 20).parameters == before and not writes_to(line, 20)
+
+
+def test_a_restore_the_profile_refuses_for_every_entry_says_so_in_one_line(line, tmp_path,
+                                                                           capsys):
+    path = backup(line, tmp_path, MCD500)
+    before = dict(model(line, 20).parameters)
+    line.stats.frames.clear()
+    code, _ = run('restore', *bus(line), *MCD500, '--eeprom', path)
+    error = capsys.readouterr().err
+    assert code == 2 and error.count('\n') == 1, error
+    assert 'every entry: MCD parameters are raw 16-bit registers' in error, error
+    assert error.rstrip().endswith('nothing written to mcd_20'), error
     assert model(line, 20).parameters == before and not writes_to(line, 20)
 
 

@@ -195,6 +195,7 @@ def reference_log_lines(node):
 def test_bytes_that_are_no_float32_on_speed_reference_get_a_reason(node, conv_holds_10_pct):
     node.spin_until(lambda: False, 1.1)  # the log throttle's period (once a second at most)
     before = len(reference_log_lines(node))
+    assert node.wait_fresh_diagnostics()
     rejected = counter(node, 'conv', 'rejected_references')
     node.raw_reference.publish(NOT_A_FLOAT32['header only, no float'])
 
@@ -207,7 +208,7 @@ def test_bytes_that_are_no_float32_on_speed_reference_get_a_reason(node, conv_ho
     assert '): ignored, nothing sent' in reasons()[0], reasons()[0]
     # Counted once, as the bus counts the values it refuses.
     assert node.spin_until(lambda: counter(node, 'conv', 'rejected_references') == rejected + 1)
-    node.spin_until(lambda: False, 0.5)  # two more /diagnostics periods: not counted twice
+    assert node.wait_fresh_diagnostics()  # a /diagnostics begun after the count: not twice
     assert counter(node, 'conv', 'rejected_references') == rejected + 1
 
 

@@ -75,6 +75,11 @@ def _parser_of(module_name: str):
 @pytest.mark.parametrize('module_name, argv, reason', [
     ('drive_bridge.tools.cli', ['status', '--bogus'],
      'drive-bridge status: error: unrecognized arguments: --bogus (see drive-bridge status'),
+    # An option before the command is the top parser's to refuse (status --help lists it).
+    ('drive_bridge.tools.cli', ['--quiet', 'status'],
+     'drive-bridge: error: unrecognized arguments: --quiet (see drive-bridge --help)'),
+    ('drive_bridge.tools.cli', ['scan', '--family', 'fc'],
+     'drive-bridge scan: error: unrecognized arguments: --family fc (see drive-bridge scan'),
     ('drive_bridge.tools.cli', ['set', '3-41'], 'the following arguments are required: value'),
     ('drive_bridge.tools.cli', ['frobnicate'], "invalid choice: 'frobnicate'"),
     ('drive_bridge.tools.cli', [], 'the following arguments are required: COMMAND'),
