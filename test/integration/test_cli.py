@@ -107,7 +107,10 @@ def one_line(capsys):
 
 # -- reads ----------------------------------------------------------------------------------
 def test_scan_finds_each_device_and_reports_a_vlt6000_card_as_an_option_card(line):
-    code, out = run('scan', *bus(line, SILENT_TIMEOUT_S), '--addresses', '1-22')
+    # 1 s, not 0.5: in 2 of 3 fresh-clone runs of .ci/run the first VLT (address 5) was not
+    # answered within 0.5 s and skipped, the second (6) was; cause not found (not load alone:
+    # it passes beside three CPU hogs, and with an empty bytecode cache).
+    code, out = run('scan', *bus(line, 1.0), '--addresses', '1-22')
     assert code == 0
     assert 'address 1: fc fc51, state ready' in out
     card = 'vlt (VLT 5000/6000 option card: set model vlt5000 or vlt6000), state ready'
