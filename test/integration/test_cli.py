@@ -26,6 +26,7 @@ from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from drive_bridge.tools.cli import build_parser, main, Session
 from drive_bridge.tools.cli_target import make_bus
 from integration_helpers import first_line_then_reader_gone
+from pty_witness import run_unless_a_pty_lagged
 import pytest
 import yaml
 
@@ -107,16 +108,21 @@ def one_line(capsys):
 
 # -- reads ----------------------------------------------------------------------------------
 def test_scan_finds_each_device_and_reports_a_vlt6000_card_as_an_option_card(line):
-    # 1 s, not 0.5: in 2 of 3 fresh-clone runs of .ci/run the first VLT (address 5) was not
-    # answered within 0.5 s and skipped, the second (6) was; cause not found (not load alone:
-    # it passes beside three CPU hogs, and with an empty bytecode cache).
+    # In 2 of 3 fresh-clone runs of .ci/run both VLTs (5 and 6), or the first, were skipped
+    # as silent within 0.5 s; a pty that lags (test/pty_witness.py: 0.84 s seen beside the
+    # integration tier) does that. 1 s for each address, and the scan runs again when a pty
+    # lagged by 0.9 s or more while it failed.
+    run_unless_a_pty_lagged(lambda: scan_finds_each_device(line), margin_s=0.9)
+
+
+def scan_finds_each_device(line) -> None:
     code, out = run('scan', *bus(line, 1.0), '--addresses', '1-22')
     assert code == 0
     assert 'address 1: fc fc51, state ready' in out
     card = 'vlt (VLT 5000/6000 option card: set model vlt5000 or vlt6000), state ready'
-    assert f'address 5: {card}' in out
+    assert f'address 5: {card}' in out, (out, line.stats)
     # The VLT 6000 has no par. 520 (exception 00): probing it as a VLT 5000 found nothing.
-    assert f'address 6: {card}' in out
+    assert f'address 6: {card}' in out, (out, line.stats)
     assert 'address 20: mcd mcd500, state ready' in out
     assert 'address 21: mcd mcd3000, state ready' in out
     assert '5 device(s) found at addresses 1-22' in out

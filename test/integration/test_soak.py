@@ -10,6 +10,7 @@ The soak and its oracle (bench/soak.py runs 100,000 transactions).
 """
 
 from drive_bridge.sim.mcd_model import STARTING
+from pty_witness import run_unless_a_pty_lagged
 import pytest
 from soak_harness.broken import broken, EXPECTED_KINDS, VARIANTS
 from soak_harness.runner import (
@@ -29,7 +30,13 @@ def test_short_soak_over_a_pty_meets_the_invariants_and_counts_every_fault_kind(
     # Real time: on a loaded machine a held-up simulator thread answers late, and a late
     # normal reply counts as slow or lost. The oracle allows for that (a request it took
     # late is not judged by time); the exact count by kind is the virtual soak's to check,
-    # here every kind must be seen by the real serial transport as its own kind.
+    # here every kind must be seen by the real serial transport as its own kind. The longest
+    # gap is judged by time: a pty that lags by a second or more (test/pty_witness.py; one
+    # held the line's requests for 6.8 s in a run of the tier) makes the soak run again.
+    run_unless_a_pty_lagged(lambda: short_soak(transactions), margin_s=1.0)
+
+
+def short_soak(transactions: int) -> None:
     report = run_soak(SoakSettings(transactions=transactions, fault_rate=0.1, seed=7,
                                    timeout_s=0.2))
     text = report_text(report)

@@ -1,0 +1,101 @@
+"""The pty witness of the timing tests (test/pty_witness.py): it sees lags, reruns on them only."""
+
+import time
+
+import pty_witness
+from pty_witness import PtyLagged, PtyWitness, run_unless_a_pty_lagged
+import pytest
+
+
+def test_the_witness_sees_its_thread_held_up():
+    with PtyWitness() as witness:
+        assert wait_for_probes(witness, 5)
+        started = time.monotonic()
+        sum(range(15_000_000))  # one C call: no other thread of this process runs meanwhile
+        held_s = time.monotonic() - started
+        assert wait_for_probes(witness, witness.probes + 2)
+    assert witness.longest_s >= held_s / 2, (held_s, witness.longest_s)
+
+
+def wait_for_probes(witness: PtyWitness, count: int, timeout_s: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while witness.probes < count and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return witness.probes >= count
+
+
+class FakeWitness:
+    """A witness whose longest lag the test sets."""
+
+    lag_s = 0.0
+
+    def __init__(self):
+        self.longest_s = FakeWitness.lag_s
+        self.probes = 1
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info):
+        pass
+
+
+@pytest.fixture
+def fake_witness(monkeypatch):
+    monkeypatch.setattr(pty_witness, 'PtyWitness', FakeWitness)
+    return FakeWitness
+
+
+def test_a_body_that_passes_runs_once_and_gives_its_result(fake_witness):
+    runs = []
+    assert run_unless_a_pty_lagged(lambda: runs.append(1) or 'done', margin_s=0.5) == 'done'
+    assert runs == [1]
+
+
+def test_a_failure_without_a_lag_past_the_margin_fails_at_once_and_says_so(fake_witness):
+    fake_witness.lag_s = 0.5
+    runs = []
+
+    def body():
+        runs.append(1)
+        assert False, 'counted 9 against 8'
+    with pytest.raises(AssertionError, match='counted 9 against 8') as failure:
+        run_unless_a_pty_lagged(body, margin_s=0.5)
+    assert runs == [1]
+    assert 'the longest lag was 0.500 s' in failure.value.__notes__[0]
+
+
+def test_a_failure_with_a_lag_runs_again_and_a_later_pass_counts(fake_witness):
+    fake_witness.lag_s = 0.7
+    runs = []
+
+    def body():
+        runs.append(1)
+        assert len(runs) == 2, 'lagged'
+        return len(runs)
+    with pytest.warns(PtyLagged, match='0.700 s'):
+        assert run_unless_a_pty_lagged(body, margin_s=0.5) == 2
+
+
+def test_three_failures_each_with_a_lag_fail(fake_witness):
+    fake_witness.lag_s = 2.0
+    runs = []
+
+    def body():
+        runs.append(1)
+        assert False, 'always'
+    with pytest.warns(PtyLagged), pytest.raises(AssertionError, match='always') as failure:
+        run_unless_a_pty_lagged(body, margin_s=0.5)
+    assert runs == [1, 1, 1] and 'run 3 of 3' in failure.value.__notes__[0]
+
+
+def test_an_error_that_is_not_an_assertion_is_never_run_again(fake_witness):
+    fake_witness.lag_s = 9.0
+    runs = []
+
+    def body():
+        runs.append(1)
+        raise OSError('the pty is gone')
+    with pytest.raises(OSError):
+        run_unless_a_pty_lagged(body, margin_s=0.5)
+    assert runs == [1]
