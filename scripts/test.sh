@@ -1,18 +1,17 @@
 #!/usr/bin/env bash
 # Run the whole test suite, what CI runs (.ci/run), and print each step's wall and CPU time.
 # Every test function runs once, the ones marked pymodbus once more with pymodbus 3.6.9.
-# Two lanes run side by side:
-#   lane 1 (normal priority): the tests with deadlines, one tier after another
+# The steps run one after another (docs/contributing.md says why not side by side):
+#   first the steps that compute and have no deadlines
+#     docs                        scripts/docs.sh (Sphinx, every warning an error)
+#     colcon build, installed commands, then colcon test: the unit tier and the linters,
+#                                 against the install space
+#   then the tests with deadlines, one tier after another
 #     integration tier            pytest in .venv (pymodbus 3.16), pytest-xdist workers
 #     integration tier: realtime  the tests whose threads must run within milliseconds
 #                                 (those marked pymodbus also in .venv-pymodbus369)
 #     pymodbus 3.6.9              the other tests marked pymodbus, in .venv-pymodbus369
 #     ROS tier                    pytest in .venv, pytest-xdist workers
-#   lane 2 (computes, no deadlines; the normal priority, done before the realtime tests):
-#     docs                        scripts/docs.sh (Sphinx, every warning an error)
-#     colcon build, installed commands, then colcon test: the unit tier and the linters,
-#                                 against the install space
-#   Lane 2's output is printed when both lanes are done.
 # A failing step does not stop the run: the other steps run, the table marks it FAILED and
 # the script exits 1. Arguments go to the pytest runs of the checkout (scripts/test.sh -x).
 # Workers per tier: UNIT_WORKERS, INTEGRATION_WORKERS, REALTIME_WORKERS, ROS_WORKERS; by
@@ -106,7 +105,7 @@ finish() {
 trap finish EXIT
 # Ctrl-C or a TERM: stop everything this run started, at once (each step runs in the
 # background and is waited for, and a trapped signal ends the wait). Without job control the
-# background processes (lane 2, the realtime step's pymodbus 3.6.9 run) ignore SIGINT, and
+# background processes (the realtime step's pymodbus 3.6.9 run) ignore SIGINT, and
 # would go on after the run has ended and its workspace is gone.
 found=()
 collect() {  # collect PID: add every process below PID to found (Linux /proc; no forks)
@@ -171,18 +170,16 @@ echo "pymodbus $("$VENV/bin/python" -c 'import pymodbus; print(pymodbus.__versio
   "$("$VENV369/bin/python" -c 'import pymodbus; print(pymodbus.__version__)')" \
   'in .venv-pymodbus369'
 
-# Lane 1: the integration tier, its realtime tests, the pymodbus 3.6.9 run.
-lane_wire() {
+# The integration tier, its realtime tests, the pymodbus 3.6.9 run.
+wire_steps() {
   step 'integration tier' pytest_in "$VENV" -n "$integration_workers" --dist loadgroup \
     -m 'not realtime' test/integration "$@"
-  # Nothing computes beside the realtime tests: lane 2 ends first (it usually has).
-  wait_for_lane_compute
   step 'integration tier: realtime tests' realtime_tests "$@"
   step 'pymodbus 3.6.9: marked tests' pytest_in "$VENV369" -n "$integration_workers" \
     --dist loadgroup -m 'pymodbus and not realtime' test/unit test/integration "$@"
 }
-# Tests whose threads must run within milliseconds: no CPU-bound workers beside them (lane 2
-# has ended). They wait on the clock, so a few of them share the machine: the
+# Tests whose threads must run within milliseconds: no CPU-bound workers beside them. They
+# wait on the clock, so a few of them share the machine: the
 # realtime workers, and beside them one process that runs the ones marked pymodbus again with
 # pymodbus 3.6.9 (three tests, about 15 s), one after another.
 realtime_tests() {
@@ -197,7 +194,7 @@ realtime_tests() {
   return $status
 }
 
-# Lane 2: the docs and the colcon workspace (build, installed commands, unit tier, linters).
+# The docs and the colcon workspace (build, installed commands, unit tier, linters).
 mkdir -p "$workspace/src/drive_bridge"
 git -C "$root" ls-files -z --cached --others --exclude-standard \
   | (cd "$root" && xargs -0 cp --parents -t "$workspace/src/drive_bridge")
@@ -207,11 +204,10 @@ colcon_test() {
     --pytest-args -n "$unit_workers" -m 'unit or linter' --timeout 900 \
     && workspace_colcon test-result --all
 }
-lane_compute() {
-  # The normal priority, not the idle class or nice 19: beside CPU hogs of a low priority,
-  # a pty whose reader lags behind a babbling writer (test_safety_bus.py) held every pty on
-  # the machine for 6-38 s (docs/contributing.md); beside hogs of the normal priority it did
-  # not.
+compute_steps() {
+  # Alone, before the tests with deadlines: beside them in the idle scheduling class (or at
+  # nice 19) the babbling-line tests held every pty on the machine for 6-38 s, and at the
+  # normal priority the babbler missed its pace (docs/contributing.md).
   step 'docs' scripts/docs.sh "$workspace/docs"
   if step 'colcon build' workspace_colcon build --event-handlers console_direct-; then
     step 'installed commands' scripts/check_install.sh "$workspace/install"
@@ -220,17 +216,9 @@ lane_compute() {
     step 'colcon test: unit tier, linters' colcon_test
   fi
 }
-lane_compute > "$workspace/lane_compute.log" 2>&1 &
-compute_pid=$!
-wait_for_lane_compute() {  # once; the steps' table has lane 2's results
-  [ -z "$compute_pid" ] || wait "$compute_pid"
-  compute_pid=''
-}
-lane_wire "$@"
+compute_steps
+wire_steps "$@"
 # The ROS tier computes more than it waits (a node's start costs about 1 s of CPU), so it runs
 # after the wire-bound steps, not beside them.
 step 'ROS tier' pytest_in "$VENV" -n "$ros_workers" --dist loadgroup test/ros "$@"
-wait_for_lane_compute
-echo "== output of the docs and colcon steps"
-cat "$workspace/lane_compute.log"
 if grep -q 'FAILED$' "$steps"; then exit 1; fi

@@ -8,7 +8,7 @@ import sys
 import threading
 import time
 import tty
-from typing import Optional
+from typing import Callable, Optional
 
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
 from drive_bridge.protocol import rtu
@@ -249,35 +249,47 @@ class CountingSelect:
 
     def __init__(self):
         self.waits = 0
+        self._changed = threading.Condition()
 
     def select(self, *args):
-        self.waits += args[3] > 0
+        with self._changed:
+            self.waits += args[3] > 0
+            self._changed.notify_all()
         return select.select(*args)
 
+    def wait_for_waits(self, count: int, timeout_s: float = 1.0) -> None:
+        """Return once ``count`` calls that may wait have begun (or after ``timeout_s``)."""
+        with self._changed:
+            self._changed.wait_for(lambda: self.waits >= count, timeout_s)
 
-def answer_one_request(fd: int, reply: bytes, pause_s: Optional[float]) -> None:
+
+def answer_one_request(fd: int, reply: bytes, pause_s: Optional[float],
+                       before_byte: Callable[[int], None] = lambda index: None) -> None:
     """
     Read one request on a pty's master side, then answer it.
 
     With ``pause_s`` None all of ``reply`` is written in one go, else one byte at a time with
-    ``pause_s`` before each.
+    ``pause_s`` and ``before_byte(index)`` before each.
     """
     select.select([fd], [], [], 5.0)
     os.read(fd, 256)
     if pause_s is None:
         os.write(fd, reply)
         return
-    for byte in reply:
+    for index, byte in enumerate(reply):
+        before_byte(index)
         time.sleep(pause_s)
         os.write(fd, bytes([byte]))
 
 
 @contextlib.contextmanager
-def native_transport_answered(reply: bytes, pause_s: Optional[float] = None):
+def native_transport_answered(reply: bytes, pause_s: Optional[float] = None,
+                              before_byte: Callable[[int], None] = lambda index: None):
     """Yield the native engine on a pty whose other side answers one request with ``reply``."""
     master_fd, slave_fd = os.openpty()
     tty.setraw(master_fd)
-    answer = threading.Thread(target=answer_one_request, args=(master_fd, reply, pause_s))
+    answer = threading.Thread(target=answer_one_request,
+                              args=(master_fd, reply, pause_s, before_byte))
     transport = transport_for(LinkSettings(port=os.ttyname(slave_fd), parity='N',
                                            timeout_s=1.0), 'native')
     try:
@@ -290,15 +302,22 @@ def native_transport_answered(reply: bytes, pause_s: Optional[float] = None):
         os.close(slave_fd)
 
 
-@pytest.mark.realtime  # the transport must wake before the answering thread writes on
+@pytest.mark.realtime
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='VMIN and select: Linux')
 @pytest.mark.parametrize('pause_s', [0.0, 0.002])
 def test_native_engine_wakes_twice_for_a_reply_however_its_bytes_arrive(pause_s, monkeypatch):
     # VMIN: the kernel reports the port readable once the 5 first bytes are there, then once
-    # the rest is, not for every byte (nor every USB batch).
+    # the rest is, not for every byte (nor every USB batch). The answer's first byte waits
+    # for the transport's first wait to begin, its sixth for the second: on a loaded machine
+    # the whole reply was once there before the transport looked (0 waits), which says
+    # nothing about the wake-ups; an engine that woke for each byte still waits 17 times.
     reply = rtu.registers_response(20, 3, [1, 2, 3, 4, 5, 6]).encode()
     counting = CountingSelect()
-    with native_transport_answered(reply, pause_s) as transport:
+
+    def after_the_transport_waits(index: int) -> None:
+        if index in (0, 5):
+            counting.wait_for_waits(1 if index == 0 else 2)
+    with native_transport_answered(reply, pause_s, after_the_transport_waits) as transport:
         monkeypatch.setattr(serial_port, 'select', counting)
         assert transport.execute(20, ReadRegisters(2, 6)) == [1, 2, 3, 4, 5, 6]
         assert counting.waits == 2
