@@ -52,15 +52,20 @@ def test_a_body_that_passes_runs_once_and_gives_its_result(fake_witness):
     assert runs == [1]
 
 
+def failing(runs: list, failure: Exception):
+    """Return a body that notes its run in ``runs`` and raises ``failure``."""
+    def body():
+        runs.append(1)
+        raise failure
+    return body
+
+
 def test_a_failure_without_a_lag_past_the_margin_fails_at_once_and_says_so(fake_witness):
     fake_witness.lag_s = 0.5
     runs = []
-
-    def body():
-        runs.append(1)
-        assert False, 'counted 9 against 8'
     with pytest.raises(AssertionError, match='counted 9 against 8') as failure:
-        run_unless_a_pty_lagged(body, margin_s=0.5)
+        run_unless_a_pty_lagged(failing(runs, AssertionError('counted 9 against 8')),
+                                margin_s=0.5)
     assert runs == [1]
     assert 'the longest lag was 0.500 s' in failure.value.__notes__[0]
 
@@ -80,22 +85,14 @@ def test_a_failure_with_a_lag_runs_again_and_a_later_pass_counts(fake_witness):
 def test_three_failures_each_with_a_lag_fail(fake_witness):
     fake_witness.lag_s = 2.0
     runs = []
-
-    def body():
-        runs.append(1)
-        assert False, 'always'
     with pytest.warns(PtyLagged), pytest.raises(AssertionError, match='always') as failure:
-        run_unless_a_pty_lagged(body, margin_s=0.5)
+        run_unless_a_pty_lagged(failing(runs, AssertionError('always')), margin_s=0.5)
     assert runs == [1, 1, 1] and 'run 3 of 3' in failure.value.__notes__[0]
 
 
 def test_an_error_that_is_not_an_assertion_is_never_run_again(fake_witness):
     fake_witness.lag_s = 9.0
     runs = []
-
-    def body():
-        runs.append(1)
-        raise OSError('the pty is gone')
     with pytest.raises(OSError):
-        run_unless_a_pty_lagged(body, margin_s=0.5)
+        run_unless_a_pty_lagged(failing(runs, OSError('the pty is gone')), margin_s=0.5)
     assert runs == [1]
