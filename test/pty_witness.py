@@ -11,8 +11,10 @@ saw no gap over 0.26 s); the bytes were.
 
 A test whose assertion judges time on a pty (a reply later than its margin counts as slow
 or lost) runs its body through :func:`run_unless_a_pty_lagged`: the body runs again, at most
-twice, only when it failed while the witness saw a byte arrive later than the margin. The
-assertions are the same on every run, and a failure without such a lag fails at once.
+twice, only when it failed while the witness saw a byte arrive, or its own thread wake,
+later than the margin (a long pause of the test's process counts too: the simulators are
+threads of it). The assertions are the same on every run, and a failure without such a lag,
+or with a witness that stopped early, fails at once.
 """
 
 import os
@@ -45,6 +47,7 @@ class PtyWitness:
         self.longest_s = 0.0  # the longest lag seen, in flight or of a wake-up
         self.probes = 0
         self._sent_at_s = None  # when the byte in flight was written
+        self.error = None  # what stopped the thread early: its figures are then no evidence
         self._lock = threading.Lock()
         self._stop_r, self._stop_w = os.pipe()
         self._thread = threading.Thread(target=self._run, name='pty-witness', daemon=True)
@@ -57,12 +60,18 @@ class PtyWitness:
         os.write(self._stop_w, b'.')
         self._thread.join()
         with self._lock:
-            if self._sent_at_s is not None:  # a byte still on its way counts as late
+            if self._sent_at_s is not None and self.error is None:  # a byte on its way is late
                 self.longest_s = max(self.longest_s, time.monotonic() - self._sent_at_s)
         os.close(self._stop_r)
         os.close(self._stop_w)
 
     def _run(self) -> None:
+        try:
+            self._probe_until_stopped()
+        except Exception as error:  # noqa: B902 (kept, and read as no evidence of a lag)
+            self.error = error
+
+    def _probe_until_stopped(self) -> None:
         master, slave = pty.openpty()
         tty.setraw(slave)
         try:
@@ -116,6 +125,9 @@ def run_unless_a_pty_lagged(body: Callable[[], Result], margin_s: float,
                 failure = error
         lag = f'pty witness: the longest lag was {witness.longest_s:.3f} s ' \
             f'({witness.probes} probes; margin {margin_s:g} s), run {run} of {runs}'
+        if witness.error is not None:
+            failure.add_note(f'pty witness: stopped by {witness.error!r}, no evidence of a lag')
+            raise failure
         if witness.longest_s <= margin_s or run == runs:
             failure.add_note(lag)
             raise failure

@@ -32,6 +32,7 @@ class FakeWitness:
     def __init__(self):
         self.longest_s = FakeWitness.lag_s
         self.probes = 1
+        self.error = None
 
     def __enter__(self):
         return self
@@ -40,10 +41,25 @@ class FakeWitness:
         pass
 
 
+class Lag:
+    """Sets the fake witness's lag for one test (monkeypatch restores it)."""
+
+    def __init__(self, monkeypatch):
+        self.monkeypatch = monkeypatch
+
+    @property
+    def lag_s(self) -> float:
+        return FakeWitness.lag_s
+
+    @lag_s.setter
+    def lag_s(self, seconds: float) -> None:
+        self.monkeypatch.setattr(FakeWitness, 'lag_s', seconds)
+
+
 @pytest.fixture
 def fake_witness(monkeypatch):
     monkeypatch.setattr(pty_witness, 'PtyWitness', FakeWitness)
-    return FakeWitness
+    return Lag(monkeypatch)
 
 
 def test_a_body_that_passes_runs_once_and_gives_its_result(fake_witness):
@@ -96,3 +112,19 @@ def test_an_error_that_is_not_an_assertion_is_never_run_again(fake_witness):
     with pytest.raises(OSError):
         run_unless_a_pty_lagged(failing(runs, OSError('the pty is gone')), margin_s=0.5)
     assert runs == [1]
+
+
+def test_a_witness_that_stopped_early_is_no_evidence(monkeypatch):
+    def broken_probe(self, master, slave):
+        self._sent_at_s = time.monotonic()
+        raise OSError('EIO')
+    monkeypatch.setattr(PtyWitness, '_probe', broken_probe)
+    runs = []
+
+    def slow_failure():
+        runs.append(1)
+        time.sleep(0.6)
+        raise AssertionError('counted 9 against 8')
+    with pytest.raises(AssertionError) as failure:
+        run_unless_a_pty_lagged(slow_failure, margin_s=0.5)
+    assert runs == [1] and 'no evidence' in failure.value.__notes__[0]
