@@ -68,7 +68,7 @@ class PtyWitness:
     def _run(self) -> None:
         try:
             self._probe_until_stopped()
-        except Exception as error:  # noqa: B902 (kept, and read as no evidence of a lag)
+        except Exception as error:  # kept: the figures are then no evidence of a lag
             self.error = error
 
     def _probe_until_stopped(self) -> None:
@@ -113,8 +113,8 @@ def run_unless_a_pty_lagged(body: Callable[[], Result], margin_s: float,
 
     ``margin_s``: the shortest lag that could change what the body asserts (for a reply
     counted as slow after 1 s and sent 1.5 s late, 0.5 s). A failure is raised with the
-    witness's longest lag added to it: at once when no byte was later than the margin, or
-    after ``runs`` runs that each failed with such a lag.
+    witness's longest lag added to it: at once when the witness saw no lag past the margin
+    or stopped early, or after ``runs`` runs that each failed with such a lag.
     """
     for run in range(1, runs + 1):
         witness = PtyWitness()

@@ -2,6 +2,7 @@
 
 import time
 
+from integration_helpers import wait_until
 import pty_witness
 from pty_witness import PtyLagged, PtyWitness, run_unless_a_pty_lagged
 import pytest
@@ -9,19 +10,13 @@ import pytest
 
 def test_the_witness_sees_its_thread_held_up():
     with PtyWitness() as witness:
-        assert wait_for_probes(witness, 5)
+        assert wait_until(lambda: witness.probes >= 5, 10.0)
         started = time.monotonic()
         sum(range(15_000_000))  # one C call: no other thread of this process runs meanwhile
         held_s = time.monotonic() - started
-        assert wait_for_probes(witness, witness.probes + 2)
+        probes = witness.probes
+        assert wait_until(lambda: witness.probes >= probes + 2, 10.0)
     assert witness.longest_s >= held_s / 2, (held_s, witness.longest_s)
-
-
-def wait_for_probes(witness: PtyWitness, count: int, timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while witness.probes < count and time.monotonic() < deadline:
-        time.sleep(0.01)
-    return witness.probes >= count
 
 
 class FakeWitness:
@@ -41,28 +36,14 @@ class FakeWitness:
         pass
 
 
-class Lag:
-    """Sets the fake witness's lag for one test (monkeypatch restores it)."""
-
-    def __init__(self, monkeypatch):
-        self.monkeypatch = monkeypatch
-
-    @property
-    def lag_s(self) -> float:
-        return FakeWitness.lag_s
-
-    @lag_s.setter
-    def lag_s(self, seconds: float) -> None:
-        self.monkeypatch.setattr(FakeWitness, 'lag_s', seconds)
-
-
 @pytest.fixture
-def fake_witness(monkeypatch):
+def lag_of_the_witness(monkeypatch):
+    """Put the fake witness in place; return how to set its lag (restored after the test)."""
     monkeypatch.setattr(pty_witness, 'PtyWitness', FakeWitness)
-    return Lag(monkeypatch)
+    return lambda seconds: monkeypatch.setattr(FakeWitness, 'lag_s', seconds)
 
 
-def test_a_body_that_passes_runs_once_and_gives_its_result(fake_witness):
+def test_a_body_that_passes_runs_once_and_gives_its_result(lag_of_the_witness):
     runs = []
     assert run_unless_a_pty_lagged(lambda: runs.append(1) or 'done', margin_s=0.5) == 'done'
     assert runs == [1]
@@ -76,8 +57,8 @@ def failing(runs: list, failure: Exception):
     return body
 
 
-def test_a_failure_without_a_lag_past_the_margin_fails_at_once_and_says_so(fake_witness):
-    fake_witness.lag_s = 0.5
+def test_a_failure_without_a_lag_past_the_margin_fails_at_once_and_says_so(lag_of_the_witness):
+    lag_of_the_witness(0.5)
     runs = []
     with pytest.raises(AssertionError, match='counted 9 against 8') as failure:
         run_unless_a_pty_lagged(failing(runs, AssertionError('counted 9 against 8')),
@@ -86,8 +67,8 @@ def test_a_failure_without_a_lag_past_the_margin_fails_at_once_and_says_so(fake_
     assert 'the longest lag was 0.500 s' in failure.value.__notes__[0]
 
 
-def test_a_failure_with_a_lag_runs_again_and_a_later_pass_counts(fake_witness):
-    fake_witness.lag_s = 0.7
+def test_a_failure_with_a_lag_runs_again_and_a_later_pass_counts(lag_of_the_witness):
+    lag_of_the_witness(0.7)
     runs = []
 
     def body():
@@ -98,16 +79,16 @@ def test_a_failure_with_a_lag_runs_again_and_a_later_pass_counts(fake_witness):
         assert run_unless_a_pty_lagged(body, margin_s=0.5) == 2
 
 
-def test_three_failures_each_with_a_lag_fail(fake_witness):
-    fake_witness.lag_s = 2.0
+def test_three_failures_each_with_a_lag_fail(lag_of_the_witness):
+    lag_of_the_witness(2.0)
     runs = []
     with pytest.warns(PtyLagged), pytest.raises(AssertionError, match='always') as failure:
         run_unless_a_pty_lagged(failing(runs, AssertionError('always')), margin_s=0.5)
     assert runs == [1, 1, 1] and 'run 3 of 3' in failure.value.__notes__[0]
 
 
-def test_an_error_that_is_not_an_assertion_is_never_run_again(fake_witness):
-    fake_witness.lag_s = 9.0
+def test_an_error_that_is_not_an_assertion_is_never_run_again(lag_of_the_witness):
+    lag_of_the_witness(9.0)
     runs = []
     with pytest.raises(OSError):
         run_unless_a_pty_lagged(failing(runs, OSError('the pty is gone')), margin_s=0.5)

@@ -314,9 +314,11 @@ def test_native_engine_wakes_twice_for_a_reply_however_its_bytes_arrive(pause_s,
     reply = rtu.registers_response(20, 3, [1, 2, 3, 4, 5, 6]).encode()
     counting = CountingSelect()
 
+    waits_before_byte = {0: 1, rtu.MIN_RESPONSE_BYTES: 2}
+
     def after_the_transport_waits(index: int) -> None:
-        if index in (0, 5):
-            counting.wait_for_waits(1 if index == 0 else 2)
+        if index in waits_before_byte:
+            counting.wait_for_waits(waits_before_byte[index])
     with native_transport_answered(reply, pause_s, after_the_transport_waits) as transport:
         monkeypatch.setattr(serial_port, 'select', counting)
         assert transport.execute(20, ReadRegisters(2, 6)) == [1, 2, 3, 4, 5, 6]
