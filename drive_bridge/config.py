@@ -24,6 +24,8 @@ from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.protocols import protocol_settings, PROTOCOLS
 
+GUARD_DEFAULTS = ', '.join(f'{name} {spec.reply_guard_s:g} s' for name, spec in PROTOCOLS.items()
+                           if spec.reply_guard_s)
 BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
 PARITIES = ('N', 'E', 'O')
 DEVICE_NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
@@ -52,6 +54,11 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
             "pause in seconds between transactions; 0 = the protocol's own: 3.5 characters "
             'on Modbus RTU and AP ASCII, 2 on the FC protocol, none on TCP',
             low=0.0, high=1.0),
+    Setting('late_reply_guard', float, 0.0,
+            'seconds after a failed transaction during which the line is quarantined: late '
+            'replies are read, counted and discarded before the next request; 0 = the '
+            f"protocol's own: {GUARD_DEFAULTS} (Modbus TCP has transaction ids and needs none)",
+            low=0.0, high=10.0),
     Setting('local_echo', bool, False, 'the RS-485 adapter echoes what it sends'),
     Setting('diagnostics_period', float, 1.0, 'seconds between /diagnostics messages',
             low=0.1, high=60.0),
@@ -235,7 +242,8 @@ def build_config(bus_values: Mapping[str, Any],
     link = LinkSettings(
         protocol=bus['protocol'], port=bus['port'], host=bus['host'],
         tcp_port=bus['tcp_port'], baudrate=bus['baudrate'], parity=bus['parity'],
-        stopbits=bus['stopbits'], timeout_s=bus['timeout'], local_echo=bus['local_echo'])
+        stopbits=bus['stopbits'], timeout_s=bus['timeout'], local_echo=bus['local_echo'],
+        reply_guard_s=bus['late_reply_guard'])
     gap = bus['frame_gap'] or link.frame_gap_s
     timing = BusTiming(retries=bus['retries'], offline_after=bus['offline_after'],
                        backoff_initial_s=min(1.0, bus['backoff_max']),

@@ -55,20 +55,34 @@ class TruncatedFrame(BadFrame):
     kind = 'truncated'
 
 
+class AmbiguousReply(BadFrame):
+    """Two frames of the unit in one reply window: neither is provably the answer."""
+
+    kind = 'ambiguous'
+
+
+class MismatchedReply(BadFrame):
+    """
+    A frame of the unit that cannot answer the request: a late reply to an earlier one.
+
+    It carries another function, register count, echo or parameter, or it was whole before
+    the request and a reply could have crossed the wire.
+    """
+
+    kind = 'mismatch'
+
+
 class LineBabble(LinkDown):
     """Bytes keep arriving past the transaction's deadline: another master or a faulty device."""
 
     kind = 'babble'
 
 
-# Every transaction failure kind, in the order /diagnostics lists them. ``late_reply``: a
-# whole reply to an earlier request that came after its transaction gave up, dropped by a
-# Modbus RTU engine (the transaction it came into still succeeds): raise the timeout.
-# ``late_bytes``: bytes found waiting before a Modbus RTU request and dropped, counted on the
-# device asked next: they came after the last transaction ended (a late reply, or noise), so
-# the reply that transaction took may have been an older one.
-FAILURE_KINDS = ('timeout', 'crc', 'wrong_address', 'truncated', 'bad_frame', 'exception',
-                 'nak', 'link', 'babble', 'late_reply', 'late_bytes')
+# Every transaction failure kind, in the order /diagnostics lists them. Frames discarded as
+# late (a reply to an earlier request) are not failures of a transaction: /diagnostics counts
+# them apart, against the unit they name (``late_replies``).
+FAILURE_KINDS = ('timeout', 'crc', 'wrong_address', 'truncated', 'bad_frame', 'ambiguous',
+                 'mismatch', 'exception', 'nak', 'link', 'babble')
 
 
 class DeviceException(TransportError):

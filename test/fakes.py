@@ -109,3 +109,63 @@ class ScriptedPort:
 
     def close(self):
         pass
+
+
+class ScriptedLine:
+    """
+    A byte line on a :class:`FakeClock` with a device behind it (for the line discipline).
+
+    ``device(request, now)`` is called with every write and returns what the device sends
+    back: a list of ``(delay_s, bytes)``, each arriving whole ``delay_s`` after the write (or,
+    with ``char_s`` set, byte by byte at that pace from then on). ``arrive(delay_s, data)``
+    puts bytes on the line without a request. Reads take what has arrived and move the clock
+    to the moment the bytes they wait for arrive, or to the end of their timeout.
+    """
+
+    def __init__(self, clock: FakeClock, device=None, char_s: float = 0.0):
+        self.clock = clock
+        self.device = device or (lambda request, now: [])
+        self.char_s = char_s
+        self.arrivals = []  # (time, byte) not yet read, in time order
+        self.writes = []  # (time, bytes)
+        self.is_open = False
+        self.waits = []  # the timeout of every read that waited
+
+    def connect(self):
+        self.is_open = True
+
+    def close(self):
+        self.is_open = False
+
+    def arrive(self, delay_s: float, data: bytes) -> None:
+        """Put ``data`` on the line ``delay_s`` from now (paced by ``char_s`` if set)."""
+        start = self.clock.now + delay_s
+        self.arrivals.extend((start + (i + 1) * self.char_s, byte)
+                             for i, byte in enumerate(data))
+        self.arrivals.sort(key=lambda arrival: arrival[0])
+
+    def write(self, data: bytes, deadline: float) -> None:
+        self.writes.append((self.clock.now, bytes(data)))
+        for delay_s, reply in self.device(bytes(data), self.clock.now):
+            self.arrive(delay_s, reply)
+
+    def _take(self, count: int) -> bytes:
+        taken = [byte for moment, byte in self.arrivals if moment <= self.clock.now][:count]
+        self.arrivals = self.arrivals[len(taken):]
+        return bytes(taken)
+
+    def read(self, count: int, timeout_s: float, at_least: int = 1) -> bytes:
+        wanted = min(at_least, count)
+        there = sum(1 for moment, _ in self.arrivals if moment <= self.clock.now)
+        if there < wanted and timeout_s > 0:
+            self.waits.append(timeout_s)
+            end = self.clock.now + timeout_s
+            if len(self.arrivals) >= wanted and self.arrivals[wanted - 1][0] <= end:
+                self.clock.now = max(self.clock.now, self.arrivals[wanted - 1][0])
+            else:
+                self.clock.now = end
+        return self._take(count)
+
+    def wait_quiet(self, timeout_s: float) -> bytes:
+        self.clock.now += max(0.0, timeout_s)
+        return self._take(len(self.arrivals))

@@ -62,7 +62,7 @@ class BusMaster:
         self._outbox = outbox = EventOutbox(listener)
         self._jobs = jobs = JobQueue()
         runner = TransactionRunner(transport, timing.frame_gap_s, timing.slow_reply_s, clock,
-                                   sleep)
+                                   sleep, table.by_unit)
         polls = PollScheduler(runner, table, HealthKeeper(table, timing, outbox, clock),
                               jobs)
         self._link = link = LinkHealth(transport, timing.backoff_initial_s,

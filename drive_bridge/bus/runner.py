@@ -27,8 +27,10 @@ class TransactionRunner:
 
     def __init__(self, transport: Transport, frame_gap_s: float = 0.0,
                  slow_reply_s: float = 0.0, clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep):
+                 sleep: Callable[[float], None] = time.sleep,
+                 by_unit: Optional[Callable[[int], Optional[BusDevice]]] = None):
         self.transport = transport
+        self.by_unit = by_unit  # the device of a unit, to count its late replies against
         self.frame_gap_s = frame_gap_s
         self.slow_reply_s = slow_reply_s  # a valid reply slower than this counts as slow
         self.clock = clock
@@ -69,20 +71,36 @@ class TransactionRunner:
         try:
             result = self.transport.execute(device.spec.unit, request)
         except TransportError as error:
-            self.last_end_s = self.clock()
-            self._count_recovered(device)
+            self._ended(device)
             device.stats.record_error(error)
             raise
-        self.last_end_s = self.clock()
-        rtt_s = self.last_end_s - started - self.in_flight_s
-        self._count_recovered(device)
+        ended_s = self.clock()
+        self._ended(device)
+        report = self.transport.last_report
+        rtt_s = ended_s - report.after_answer_s - report.held_s - started - self.in_flight_s
         device.stats.record_ok(rtt_s, slow=0 < self.slow_reply_s < rtt_s)
         return result
 
-    def _count_recovered(self, device: BusDevice) -> None:
-        """Add the failures the transport recovered from itself (AP ASCII NAKs)."""
-        for kind, count in self.transport.last_recovered.items():
+    def _ended(self, device: BusDevice) -> None:
+        """
+        Note when the line went quiet and count what the transaction recovered or discarded.
+
+        The transport may already have kept part of the gap after the last byte (its end of
+        frame check, a quarantine): the gap before the next request counts from the last
+        byte. Failures it recovered from itself (AP ASCII NAKs) go to ``device``; each late
+        frame it discarded to the device of the unit it names (``device`` where it names
+        none, or no device of this bus), and bytes that were no frame to ``device``.
+        """
+        transport = self.transport
+        report = transport.last_report
+        self.last_end_s = self.clock() - report.quiet_s
+        for kind, count in transport.last_recovered.items():
             device.stats.errors[kind] += count
+        for frame in report.late:
+            named = None if frame.unit is None or self.by_unit is None else \
+                self.by_unit(frame.unit)
+            (named or device).stats.late_replies += 1
+        device.stats.discarded_bytes += report.noise_bytes
 
     def explain(self, device: BusDevice, error: TransportError) -> str:
         """Return a failure in words; a refusal with the profile's text and detail read."""

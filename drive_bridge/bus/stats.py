@@ -16,6 +16,8 @@ class DeviceStats:
     retries: int = 0
     slow_replies: int = 0
     refused_writes: int = 0  # writes the monitor-only guard stopped before the wire
+    late_replies: int = 0  # whole frames naming this device discarded as late (never taken)
+    discarded_bytes: int = 0  # bytes discarded in its transactions that were no whole frame
     last_error: str = ''
     rtt_last_s: float = 0.0
     rtt_avg_s: float = 0.0
@@ -43,6 +45,8 @@ class DeviceStats:
             'errors': str(sum(self.errors.values())),
             'retries': str(self.retries),
             'slow_replies': str(self.slow_replies),
+            'late_replies': str(self.late_replies),
+            'discarded_bytes': str(self.discarded_bytes),
             'last_error': self.last_error,
             'rtt_last_ms': f'{self.rtt_last_s * 1000:.1f}',
             'rtt_avg_ms': f'{self.rtt_avg_s * 1000:.1f}',

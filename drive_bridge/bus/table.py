@@ -52,6 +52,9 @@ class DeviceTable:
         self._devices: Dict[str, BusDevice] = {spec.name: BusDevice(spec, now)
                                                for spec in specs}
         self._lock = threading.RLock()
+        self._by_unit: Dict[int, BusDevice] = {}
+        for device in reversed(list(self._devices.values())):
+            self._by_unit[device.spec.unit] = device
 
     def locked(self) -> ContextManager:
         """Hold the table's lock for a change that others must see whole (any thread)."""
@@ -77,6 +80,10 @@ class DeviceTable:
             raise CommandRefused(
                 f'unknown device {name!r}: this bus has {", ".join(self._devices)}')
         return device
+
+    def by_unit(self, unit: int) -> Optional[BusDevice]:
+        """Return the first device at bus address ``unit``, or None (no lock: fixed)."""
+        return self._by_unit.get(unit)
 
     def next_due(self) -> Optional[BusDevice]:
         """Return the device whose poll is due first, or None without devices."""

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 from drive_bridge.protocol.commands import Command
+from drive_bridge.protocol.framing import Cut, Frame
 
 STX, ETX, EOT, ENQ, ACK, NAK, BEL = 0x02, 0x03, 0x04, 0x05, 0x06, 0x15, 0x07
 SINGLE_BYTE_REPLIES = {ACK: 'ACK', NAK: 'NAK', BEL: 'BEL'}
@@ -159,6 +160,42 @@ def decode_reply(buffer: bytes) -> Reply:
     if not lrc_matches(frame[:5], frame[5:7]):
         return Reply(kind='error', error='LRC error in the reply')
     return Reply(kind='frame', digits=bytes(frame[1:5]), needed=FRAME_BYTES)
+
+
+class ReplyFramer:
+    """
+    AP ASCII replies as a master receives them: the :class:`~.framing.Framer` of AP ASCII.
+
+    ACK, NAK and BEL are frames of one byte, ``STX dddd lrc ETX`` one of eight; no reply names
+    the slave that sent it (``unit`` None). Any other first byte begins no frame.
+    """
+
+    min_bytes = 1
+    max_bytes = FRAME_BYTES
+    names_units = False
+
+    @staticmethod
+    def cut(buffer: bytes) -> Cut:
+        """Return the reply at the start of ``buffer``, or what it needs; never raise."""
+        if not buffer:
+            return Cut(needed=1)
+        if buffer[0] in SINGLE_BYTE_REPLIES:
+            return Cut(Frame(bytes(buffer[:1])))
+        if buffer[0] != STX:
+            return Cut()
+        if len(buffer) < FRAME_BYTES:
+            return Cut(needed=FRAME_BYTES)
+        raw = bytes(buffer[:FRAME_BYTES])
+        if raw[-1] != ETX:
+            return Cut(Frame(raw, None, 'reply is not STX dddd lrc ETX', 'bad_frame'))
+        if not lrc_matches(raw[:5], raw[5:7]):
+            return Cut(Frame(raw, None, 'LRC error in the reply', 'crc'))
+        return Cut(Frame(raw))
+
+
+def reply_kind(frame: Frame) -> str:
+    """Return what a valid reply is: 'ACK', 'NAK', 'BEL' or 'frame' (four digits)."""
+    return SINGLE_BYTE_REPLIES.get(frame.raw[0], 'frame')
 
 
 @dataclass(frozen=True)

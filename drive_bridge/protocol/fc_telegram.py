@@ -56,6 +56,7 @@ from typing import Dict, Optional, Tuple
 
 from drive_bridge.errors import ProtocolError
 from drive_bridge.protocol import rtu
+from drive_bridge.protocol.framing import Cut, Frame
 from drive_bridge.protocol.requests import Request
 
 STX = 0x02
@@ -401,6 +402,41 @@ def _parse(candidate: bytes) -> FcTelegram:
     if len(payload) == 4:
         return FcTelegram(adr, pcd1, pcd2, pke, ind, int.from_bytes(payload, 'big'))
     return FcTelegram(adr, pcd1, pcd2, pke, ind, text=payload)
+
+
+class ReplyFramer:
+    """
+    FC-protocol telegrams as a master receives them: the :class:`~.framing.Framer` of FC.
+
+    ``STX LGE`` give the length (LGE + 2 bytes); a first byte that is not STX, or an LGE no
+    telegram has, begins no frame. The BCC decides whether a whole telegram is valid; a
+    corrupt one still names the address of its ADR byte.
+    """
+
+    min_bytes = MIN_TELEGRAM_BYTES
+    max_bytes = MAX_LGE + 2
+    names_units = True
+
+    @staticmethod
+    def cut(buffer: bytes) -> Cut:
+        """Return the telegram at the start of ``buffer``, or what it needs; never raise."""
+        if not buffer:
+            return Cut(needed=MIN_TELEGRAM_BYTES)
+        if buffer[0] != STX:
+            return Cut()
+        if len(buffer) < 2:
+            return Cut(needed=MIN_TELEGRAM_BYTES)
+        if not valid_lge(buffer[1]):
+            return Cut()
+        total = buffer[1] + 2
+        if len(buffer) < total:
+            return Cut(needed=total)
+        raw = bytes(buffer[:total])
+        unit = decode_address(raw[2]).address
+        if bcc(raw) != 0:
+            return Cut(Frame(raw, unit, f'BCC {raw[-1]:02X}h, expected {bcc(raw[:-1]):02X}h',
+                             'crc'))
+        return Cut(Frame(raw, unit))
 
 
 # -- the master's requests --------------------------------------------------------------

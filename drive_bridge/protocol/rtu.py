@@ -12,6 +12,7 @@ import struct
 from typing import Optional
 
 from drive_bridge.protocol.crc import append_crc, crc_ok
+from drive_bridge.protocol.framing import Cut, Frame
 
 READ_COILS = 0x01
 READ_HOLDING_REGISTERS = 0x03
@@ -35,6 +36,7 @@ _EMPTY_FUNCTIONS = {GET_COMM_EVENT_COUNTER, 0x0C, REPORT_SERVER_ID}
 _COUNTED_FUNCTIONS = {WRITE_MULTIPLE_COILS, WRITE_MULTIPLE_REGISTERS}
 
 MAX_ADU_BYTES = 256
+MAX_UNIT = 247  # slave addresses are 1-247; 0 is broadcast, which nobody answers
 
 
 @dataclass(frozen=True)
@@ -180,53 +182,49 @@ def decode_response(buffer: bytes, unit: int, function: int) -> ResponseResult:
                           needed=length)
 
 
-@dataclass(frozen=True)
-class NewestReply:
+class ReplyFramer:
     """
-    The newest reply of a unit to a function among whole frames that came back to back.
+    Modbus RTU replies as a master receives them: the :class:`~.framing.Framer` of RTU.
 
-    ``frame``: the last whole valid frame of the unit with the function (or its exception),
-    if any; ``frames``: how many whole valid frames were found, of any unit (every one but
-    ``frame`` is a late reply). ``needed``: when the bytes after the last whole frame begin a
-    reply of the unit to the function that is not whole yet, the buffer length that makes it
-    whole as far as its bytes tell (read up to it, then ask again), else 0. ``spoiled``: those
-    bytes are a whole reply of the unit to the function whose CRC is wrong. Bytes that begin
-    no frame of the unit (a stray byte, garbage) end the scan and are not counted.
+    A reply's length follows from its first bytes: an exception is 5 bytes, the echo of a
+    write 8, a read 5 + its byte count. A first byte that is no slave address (0 or above
+    247) or a function code no reply carries begins no frame. The CRC decides whether a whole
+    frame is valid; a corrupt one still names the unit of its first byte.
     """
 
-    frame: Optional[RtuFrame] = None
-    frames: int = 0
-    needed: int = 0
-    spoiled: bool = False
+    min_bytes = MIN_RESPONSE_BYTES
+    max_bytes = MAX_ADU_BYTES
+    names_units = True
+
+    @staticmethod
+    def cut(buffer: bytes) -> Cut:
+        """Return the reply at the start of ``buffer``, or what it needs; never raise."""
+        if not buffer:
+            return Cut(needed=MIN_RESPONSE_BYTES)
+        if not 1 <= buffer[0] <= MAX_UNIT:
+            return Cut()
+        length = response_length(buffer)
+        if length is None:
+            if len(buffer) >= 2 and not _known_reply_function(buffer[1]):
+                return Cut()
+            return Cut(needed=max(len(buffer) + 1, 3))
+        if len(buffer) < length:
+            return Cut(needed=length)
+        raw = bytes(buffer[:length])
+        if not crc_ok(raw):
+            return Cut(Frame(raw, raw[0], 'CRC error', 'crc'))
+        return Cut(Frame(raw, raw[0]))
 
 
-def _begins_reply_of(buffer: bytes, unit: int, function: int) -> bool:
-    """Return whether ``buffer`` can be the start of a reply of ``unit`` to ``function``."""
-    return buffer[0] == unit and (len(buffer) < 2 or buffer[1] & 0x7F == function)
+def _known_reply_function(function: int) -> bool:
+    """Return whether a reply can carry ``function`` (exceptions: any, bit 7 set)."""
+    return bool(function & 0x80) or function in _ECHO_RESPONSES or function in _COUNTED_RESPONSES
 
 
-def newest_reply(buffer: bytes, unit: int, function: int) -> NewestReply:
-    """
-    Return the newest reply of ``unit`` to ``function`` in ``buffer`` (see NewestReply).
-
-    RTU has no transaction id, and a device answers requests in order: of several whole
-    replies received back to back, the last one answers the latest request. Never raises.
-    """
-    frame, frames, start = None, 0, 0
-    while start < len(buffer):
-        rest = buffer[start:]
-        length = response_length(rest)
-        ours = _begins_reply_of(rest, unit, function)
-        if length is None or len(rest) < length:
-            whole_length = length or max(len(rest) + 1, 3)
-            return NewestReply(frame, frames, start + whole_length if ours else 0)
-        if not crc_ok(rest[:length]):
-            return NewestReply(frame, frames, spoiled=ours)
-        frames += 1
-        if ours:
-            frame = RtuFrame(rest[0], rest[1], bytes(rest[2:length - 2]))
-        start += length
-    return NewestReply(frame, frames)
+def reply_frame(frame: Frame) -> RtuFrame:
+    """Return a valid received frame as an RtuFrame (unit, function, data without CRC)."""
+    raw = frame.raw
+    return RtuFrame(raw[0], raw[1], bytes(raw[2:-2]))
 
 
 def read_registers_request(unit: int, address: int, count: int) -> RtuFrame:

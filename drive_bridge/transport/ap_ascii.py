@@ -5,19 +5,28 @@ One transaction is address -> ACK -> command -> ACK, or address -> ACK -> reques
 A NAK (the slave saw a bad LRC, so it did not act) restarts the exchange from the address
 fragment, at most ``nak_retries`` times; a BEL (refused) is a DeviceException with code 7;
 silence is NoResponse (an unknown address never answers); anything else is BadFrame.
+
+Every fragment goes out and every answer is read through the line discipline
+(:mod:`.exchange`) with the AP ASCII framer. No AP ASCII reply names its slave, so an ACK
+that came late cannot be told from the ACK asked for by its bytes: after a transaction that
+ends badly the line is quarantined (the guard defaults to the MCD 3000's 250 ms response
+time), and while any exchange may still owe its answer the next transaction's first window
+stays open to its deadline: two answers in it fail the transaction (a command is then
+unanswered: a start may be running, a stop is not done).
 """
 
-import time
-from typing import Callable, Optional
+from typing import Callable, Optional, Tuple
 
-from drive_bridge.errors import BadFrame, DeviceException, NoResponse
+from drive_bridge.errors import BadFrame, DeviceException
 from drive_bridge.protocol import ap_ascii
+from drive_bridge.protocol.framing import Frame
 from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest
+from drive_bridge.transport.line_transport import LineTransport
 from drive_bridge.transport.link import LinkSettings
-from drive_bridge.transport.serial_port import PORT_ERRORS, SerialPortTransport
 import serial
 
-DRAIN_SILENCE_S = 0.02  # USB adapters deliver bytes in ~16 ms batches
+ANSWERS = ('ACK', 'NAK', 'BEL')  # a slave's answers to an address or a command
+DATA_ANSWERS = ('frame', 'NAK', 'BEL')  # its answers to a request
 
 
 class Nak(BadFrame):
@@ -26,31 +35,35 @@ class Nak(BadFrame):
     kind = 'nak'
 
 
-class ApAsciiTransport(SerialPortTransport):
+def accepting(kinds: Tuple[str, ...], what: str) -> Callable[[Frame], Frame]:
+    """Return an ``accept`` that takes a reply of ``kinds`` to ``what``, else BadFrame."""
+    def accept(frame: Frame) -> Frame:
+        kind = ap_ascii.reply_kind(frame)
+        if kind not in kinds:
+            shown = 'a data reply' if kind == 'frame' else kind
+            raise BadFrame(f'{shown} to {what}')
+        return frame
+    return accept
+
+
+class ApAsciiTransport(LineTransport):
     """Run AP ASCII transactions on one serial line (8N1); the bus thread owns it."""
+
+    framer = ap_ascii.ReplyFramer()
+    requests = (AsciiCommand, AsciiRequest)
 
     def __init__(self, settings: LinkSettings, nak_retries: int = 2,
                  address_lrc_includes_eot: bool = True,
-                 open_port: Callable[..., object] = serial.serial_for_url):
-        super().__init__(settings, open_port)
+                 open_port: Callable[..., object] = serial.serial_for_url,
+                 **line_options):
+        super().__init__(settings, open_port, **line_options)
         self.nak_retries = nak_retries
         self.address_lrc_includes_eot = address_lrc_includes_eot
         self.naks = 0  # NAKs seen (each one retried or reported)
-        self._reply_deadline = 0.0  # when the reply being read is late
 
-    def execute(self, unit: int, transaction) -> Optional[int]:
-        """Run one transaction; return the status byte or data value of a request."""
-        self._require_port()
-        if not isinstance(transaction, (AsciiCommand, AsciiRequest)):
-            raise TypeError(f'unsupported transaction {transaction!r}')
-        try:
-            return self._with_nak_retries(unit, transaction)
-        except PORT_ERRORS as error:
-            raise self._port_failed(error) from error
-
-    def _with_nak_retries(self, unit: int, transaction) -> Optional[int]:
+    def _run(self, unit: int, transaction) -> Optional[int]:
+        """Run one transaction, again from the address after a NAK; see the module."""
         attempt = 0
-        self.last_recovered = {}
         while True:
             try:
                 return self._exchange(unit, transaction)
@@ -62,55 +75,29 @@ class ApAsciiTransport(SerialPortTransport):
                 self.last_recovered = {'nak': attempt}
 
     def _exchange(self, unit: int, transaction) -> Optional[int]:
-        # Reported sent once, with the address fragment: the bus's work then overlaps the
-        # slave's answer to it (up to 250 ms), also when the address is dead.
-        self._send(ap_ascii.address_fragment(unit, self.address_lrc_includes_eot))
-        self._expect_ack('address')
-        self._send(ap_ascii.message_fragment(transaction.code), report=False)
+        discipline = self.discipline
+        address = ap_ascii.address_fragment(unit, self.address_lrc_includes_eot)
+        _answered(discipline.exchange(address, accepting(ANSWERS, 'the address')), 'address')
+        message = ap_ascii.message_fragment(transaction.code)
         if isinstance(transaction, AsciiCommand):
-            self._expect_ack(transaction.code)
+            reply = discipline.exchange(message, accepting(ANSWERS, transaction.code))
+            _answered(reply, transaction.code)
             return None
-        reply = self._receive()
-        if reply.kind != 'frame':
-            self._refused_or_bad(reply, transaction.code)
+        reply = discipline.exchange(message, accepting(DATA_ANSWERS, transaction.code))
+        _answered(reply, transaction.code)
+        digits = reply.raw[1:5]
         try:
             if transaction.reply == 'status':
-                return ap_ascii.decode_status(reply.digits)
-            return ap_ascii.decode_data(reply.digits)
+                return ap_ascii.decode_status(digits)
+            return ap_ascii.decode_data(digits)
         except ValueError as error:
             raise BadFrame(f'invalid reply to {transaction.code}: {error}') from None
 
-    def _send(self, fragment: bytes, report: bool = True) -> None:
-        self._port.reset_input_buffer()
-        self._write(fragment, time.monotonic() + self.settings.timeout_s, report)
 
-    def _expect_ack(self, what: str) -> None:
-        reply = self._receive()
-        if reply.kind != 'ACK':
-            self._refused_or_bad(reply, what)
-
-    def _refused_or_bad(self, reply: ap_ascii.Reply, what: str) -> None:
-        # A slave answers with one fragment and falls silent: drop whatever follows an
-        # unexpected answer, and a line that keeps talking is babbling (LineBabble).
-        self._drain(self._reply_deadline, DRAIN_SILENCE_S)
-        if reply.kind == 'NAK':
-            raise Nak(f'NAK to {what}: the device saw a bad LRC')
-        if reply.kind == 'BEL':
-            raise DeviceException(ap_ascii.BEL, f'{what} refused (BEL)')
-        if reply.kind == 'error':
-            raise BadFrame(f'invalid reply to {what}: {reply.error}')
-        raise BadFrame(f'unexpected {reply.kind} to {what}')
-
-    def _receive(self) -> ap_ascii.Reply:
-        deadline = self._reply_deadline = time.monotonic() + self.settings.timeout_s
-        buffer = b''
-        while True:
-            reply = ap_ascii.decode_reply(buffer)
-            if reply.kind:
-                return reply
-            chunk = self._read(reply.needed - len(buffer), deadline)
-            if not chunk:
-                if not buffer:
-                    raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
-                raise BadFrame(f'truncated reply: {len(buffer)} bytes')
-            buffer += chunk
+def _answered(reply: Frame, what: str) -> None:
+    """Return if ``reply`` is an ACK or data; raise Nak, or DeviceException for a BEL."""
+    kind = ap_ascii.reply_kind(reply)
+    if kind == 'NAK':
+        raise Nak(f'NAK to {what}: the device saw a bad LRC')
+    if kind == 'BEL':
+        raise DeviceException(ap_ascii.BEL, f'{what} refused (BEL)')

@@ -9,10 +9,33 @@ Failures are the typed errors of :mod:`drive_bridge.errors`.
 """
 
 from abc import ABC, abstractmethod
-from typing import Any, Callable, Dict
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List
 
+from drive_bridge.protocol.framing import Frame
 from drive_bridge.protocol.requests import Request
 from drive_bridge.transport.link import LinkSettings
+
+
+@dataclass
+class TransactionReport:
+    """
+    What a transaction discarded, for the statistics: whole frames and other bytes.
+
+    ``late``: whole valid frames that were not the answer (late replies), each naming its
+    unit (None: a frame that names none). ``noise_bytes``: bytes that were no whole frame.
+    ``quiet_s``: the silence the transport already kept after the line's last byte when it
+    returned (the bus counts it towards the gap before the next request). The round trip
+    leaves out ``after_answer_s``, the time from the last byte of the answer to the return
+    (the end-of-frame silence, a window held open, a quarantine), and ``held_s``, the time
+    earlier windows of the transaction stayed open after their answers.
+    """
+
+    late: List[Frame] = field(default_factory=list)
+    noise_bytes: int = 0
+    quiet_s: float = 0.0
+    after_answer_s: float = 0.0
+    held_s: float = 0.0
 
 
 def _nothing() -> None:
@@ -36,6 +59,8 @@ class Transport(ABC):
         # Called with no arguments once a request has left (see reports_request_sent); it
         # must not raise.
         self.on_request_sent: Callable[[], None] = _nothing
+        # What the last transaction discarded (late replies by unit, noise).
+        self.last_report = TransactionReport()
 
     @property
     @abstractmethod
@@ -52,7 +77,14 @@ class Transport(ABC):
 
     @abstractmethod
     def execute(self, unit: int, request: Request) -> Any:
-        """Run one request with device ``unit``; return what the reply carries."""
+        """
+        Run one request with device ``unit``; return what the reply carries.
+
+        A transport of a line without transaction ids returns only a reply that is provably
+        the answer, and raises only once the line is quiet again: a transaction that ends
+        badly quarantines the line before its error is raised (the line discipline,
+        :mod:`drive_bridge.transport.exchange`), so whatever the bus reads after it is fresh.
+        """
 
     def describe(self) -> str:
         """Return the link in words, for messages."""

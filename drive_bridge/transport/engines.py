@@ -23,14 +23,13 @@ TransportFactory = Callable[[LinkSettings, Mapping[str, Any]], Transport]
 
 
 def _modbus_rtu(link: LinkSettings, options: Mapping[str, Any]) -> Transport:
-    if options.get('serial_engine', 'native') == 'pymodbus':
-        return _pymodbus(link, options)
+    """Modbus RTU on a serial port, or RTU frames over TCP: the native engine."""
     return RtuSerialTransport(link)
 
 
-def _pymodbus(link: LinkSettings, options: Mapping[str, Any]) -> Transport:
+def _modbus_tcp(link: LinkSettings, options: Mapping[str, Any]) -> Transport:
     # Imported here: pymodbus costs every process that does not use it about 0.1 s of CPU
-    # (each node start, each CLI command), and the default engines do not.
+    # (each node start, each CLI command), and the serial engines do not.
     from drive_bridge.transport.modbus import ModbusTransport
     return ModbusTransport(link)
 
@@ -48,8 +47,8 @@ TRANSPORTS: Dict[str, TransportFactory] = {
     'modbus_rtu': _modbus_rtu,
     'ap_ascii': _ap_ascii,
     'fc_protocol': _fc_protocol,
-    'modbus_tcp': _pymodbus,
-    'rtu_over_tcp': _pymodbus,
+    'modbus_tcp': _modbus_tcp,
+    'rtu_over_tcp': _modbus_rtu,
 }
 
 

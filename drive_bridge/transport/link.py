@@ -25,6 +25,12 @@ class LinkSettings:
     stopbits: int = 0  # 0 = Modbus standard: 2 with no parity, 1 with parity
     timeout_s: float = 0.5
     local_echo: bool = False
+    reply_guard_s: float = 0.0  # the quarantine's guard; 0 = the protocol's own
+
+    @property
+    def guard_s(self) -> float:
+        """Return how long after a failed transaction late replies are waited for."""
+        return self.reply_guard_s or PROTOCOLS[self.protocol].reply_guard_s
 
     @property
     def effective_parity(self) -> str:

@@ -17,7 +17,16 @@ from drive_bridge.protocol import ap_ascii, fc_telegram, rtu
 from drive_bridge.protocol.requests import AP_ASCII_REQUESTS, MODBUS_REQUESTS
 from drive_bridge.settings import Setting
 
-SERIAL_ENGINES = ('native', 'pymodbus')
+SERIAL_ENGINES = ('native',)
+# The quarantine's guard by protocol (late_reply_guard 0): how long after a failed transaction
+# a late reply is still expected. The Modbus serial-line spec names no response time (its
+# broadcast turnaround delay is 100-200 ms); the FC protocol's slowest documented reply
+# comes 50 ms after the telegram (VLT 2800/8000), twice that is the guard; the MCD 3000 may
+# take 250 ms to answer AP ASCII (protocols.md); a transparent gateway adds its buffering.
+MODBUS_RTU_GUARD_S = 0.1
+FC_PROTOCOL_GUARD_S = 2 * fc_telegram.MAX_REPLY_DELAY_S
+AP_ASCII_GUARD_S = ap_ascii.MIN_TIMEOUT_S
+RTU_OVER_TCP_GUARD_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -40,6 +49,7 @@ class ProtocolSpec:
     default_stopbits: Callable[[str], int] = rtu.default_stopbits
     frame_gap_s: Callable[[int, str, int], float] = rtu.frame_gap_s
     min_timeout_s: float = 0.02
+    reply_guard_s: float = 0.0
     # Device addresses the protocol carries, from its options (None: the family's range).
     address_range: Optional[Callable[[Mapping[str, Any]], Tuple[int, int]]] = None
     settings: Tuple[Setting, ...] = ()
@@ -53,13 +63,16 @@ class ProtocolSpec:
 PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
     ProtocolSpec(
         'modbus_rtu', 'Modbus RTU on a serial port', 'serial', MODBUS_REQUESTS,
+        reply_guard_s=MODBUS_RTU_GUARD_S,
         settings=(Setting('serial_engine', str, 'native',
-                          'Modbus RTU on a serial port: native (reads replies by their '
-                          'length) or pymodbus', choices=SERIAL_ENGINES),)),
+                          "Modbus RTU on a serial port: native, the only engine (pymodbus's "
+                          'serial client was removed in 0.5: it takes the first frame it '
+                          'reads, docs/reliability.md "Late replies")',
+                          choices=SERIAL_ENGINES),)),
     ProtocolSpec(
         'ap_ascii', 'MCD AP ASCII on a serial port (8N1)', 'serial', AP_ASCII_REQUESTS,
         fixed_framing=('N', 1), default_stopbits=lambda parity: 1,
-        min_timeout_s=ap_ascii.MIN_TIMEOUT_S,
+        min_timeout_s=ap_ascii.MIN_TIMEOUT_S, reply_guard_s=AP_ASCII_GUARD_S,
         settings=(
             Setting('ap_nak_retries', int, 2,
                     'AP ASCII: how often an exchange answered with NAK (bad LRC, not '
@@ -71,6 +84,7 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
         'fc_protocol', 'the Danfoss FC protocol on a serial port (VLT 5000/6000 par. 500, '
         'FC 51 par. 8-30; 8E1 by default)', 'serial', (fc_telegram.FcTelegramRequest,),
         default_stopbits=lambda parity: fc_telegram.DEFAULT_STOPBITS,
+        reply_guard_s=FC_PROTOCOL_GUARD_S,
         frame_gap_s=lambda baudrate, parity, stopbits: fc_telegram.GAP_CHARACTERS *
         rtu.character_time_s(baudrate, parity, stopbits),
         address_range=lambda options: (1, 31) if options.get('address_format') ==
@@ -82,7 +96,7 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
     ProtocolSpec('modbus_tcp', 'Modbus TCP gateway', 'tcp', MODBUS_REQUESTS,
                  frame_gap_s=lambda baudrate, parity, stopbits: 0.0),
     ProtocolSpec('rtu_over_tcp', 'transparent serial-to-Ethernet gateway (Modbus RTU frames)',
-                 'tcp', MODBUS_REQUESTS,
+                 'tcp', MODBUS_REQUESTS, reply_guard_s=RTU_OVER_TCP_GUARD_S,
                  frame_gap_s=lambda baudrate, parity, stopbits: 0.0),
 )}
 

@@ -13,6 +13,7 @@ reply is complete instead of once per byte or per USB batch. Where ``VMIN`` cann
 and reads what is there: only the number of wake-ups differs, never what is read.
 """
 
+from dataclasses import replace
 import errno
 import logging
 import os
@@ -20,8 +21,7 @@ import select
 import time
 from typing import Callable, List, Optional
 
-from drive_bridge.errors import LineBabble, LinkDown
-from drive_bridge.transport.base import Transport
+from drive_bridge.errors import LinkDown
 from drive_bridge.transport.link import (
     LinkSettings, open_hint, port_framing, port_missing, PortFraming, URL_PREFIXES)
 from drive_bridge.transport.port_owner import in_use_text
@@ -38,8 +38,6 @@ except ImportError:  # not POSIX
     class TermiosError(Exception):
         """Placeholder where termios does not exist."""
 PORT_ERRORS = (serial.SerialException, OSError, TermiosError)
-EARLY_WAKE_S = 0.002  # how much before a reply's end a wait for it ends
-MIN_DRAIN_SILENCE_S = 0.005
 MAX_VMIN = 255  # VMIN is one byte of the terminal's settings
 LOG = logging.getLogger(__name__)
 
@@ -149,14 +147,19 @@ def _read_ready(fd: int, count: int) -> bytes:
         return b''
 
 
-class SerialPortTransport(Transport):
-    """Own one pyserial port (device path or URL such as ``socket://``); subclasses talk."""
+class SerialLine:
+    """
+    One pyserial port (a device path or a URL such as ``socket://``) as a byte line.
 
-    reports_request_sent = True  # each request is written by _write, which reports it
+    The :class:`~drive_bridge.transport.exchange.ByteLine` of the serial transports: it moves
+    bytes and bounds every wait; what the bytes mean and when to send is the line
+    discipline's (:mod:`.exchange`). Not thread-safe: the bus thread owns it.
+    """
 
-    def __init__(self, settings: LinkSettings,
+    def __init__(self, settings: LinkSettings, port: str,
                  open_port: Callable[..., object] = serial.serial_for_url):
-        super().__init__(settings)
+        self.settings = settings
+        self.port_name = port  # the path or URL opened (rtu_over_tcp: socket://host:port)
         self._open_port = open_port
         self._port = None
         self._fd: Optional[int] = None  # a local POSIX port's descriptor, read directly
@@ -165,21 +168,18 @@ class SerialPortTransport(Transport):
         self._framing_noted = False  # the note of a pty's framing is logged once
 
     @property
-    def connected(self) -> bool:
+    def is_open(self) -> bool:
         """Return whether the port is open."""
         return self._port is not None
-
-    def framing(self) -> PortFraming:
-        """Return the framing to open the port with (a pty: without parity)."""
-        return port_framing(self.settings)
 
     def connect(self) -> None:
         """Open the port; raise LinkDown with the reason in words."""
         self.close()
-        settings = self.settings
+        settings = replace(self.settings, port=self.port_name)
         if port_missing(settings):
             raise LinkDown(f'bus offline: {settings.port} not found')
-        framing = self.framing()
+        framing = port_framing(settings) if settings.is_serial else \
+            PortFraming(settings.effective_parity, settings.effective_stopbits)
         self._port = open_serial(settings, framing, self._open_port)
         self._framing_noted = note_framing(framing, self._framing_noted)
         self._fd = direct_descriptor(self._port)
@@ -201,24 +201,7 @@ class SerialPortTransport(Transport):
                 pass
         self._fd, self._terminal = None, None
 
-    def _require_port(self) -> None:
-        if self._port is None:
-            raise LinkDown('bus offline: not connected')
-
-    def _port_failed(self, error: Exception) -> LinkDown:
-        """Close the port after an I/O error and return the LinkDown to raise."""
-        self.close()
-        if port_missing(self.settings):
-            return LinkDown(f'bus offline: {self.settings.port} not found')
-        return LinkDown(f'bus offline: {self.settings.describe()}: {error}')
-
-    def _write(self, data: bytes, deadline: float, report: bool = True) -> None:
-        """Write ``data`` whole, then report it sent (:attr:`on_request_sent`) if asked."""
-        self._write_whole(data, deadline)
-        if report:
-            self.on_request_sent()
-
-    def _write_whole(self, data: bytes, deadline: float) -> None:
+    def write(self, data: bytes, deadline: float) -> None:
         """Write ``data`` whole; on a local POSIX port straight to its descriptor."""
         if self._fd is None:
             self._port.write(data)
@@ -235,19 +218,7 @@ class SerialPortTransport(Transport):
                 raise serial.SerialTimeoutException('the port takes no more bytes (write '
                                                     'timeout)')
 
-    def _read(self, count: int, deadline: float) -> bytes:
-        """Read up to ``count`` bytes; return early only when the deadline passes."""
-        data = b''
-        while len(data) < count:
-            remaining = deadline - time.monotonic()
-            missing = count - len(data)
-            chunk = self._read_some(missing, remaining, at_least=missing)
-            if not chunk and remaining <= 0:
-                break
-            data += chunk
-        return data
-
-    def _read_some(self, count: int, timeout_s: float, at_least: int = 1) -> bytes:
+    def read(self, count: int, timeout_s: float, at_least: int = 1) -> bytes:
         """
         Read up to ``count`` bytes, waiting at most ``timeout_s`` for ``at_least`` of them.
 
@@ -268,9 +239,20 @@ class SerialPortTransport(Transport):
                 return b''
         return port.read(count)
 
+    def wait_quiet(self, timeout_s: float) -> bytes:
+        """
+        Wait ``timeout_s`` and return whatever arrived meanwhile (b'': the line kept quiet).
+
+        VMIN is left as it is: the wait ends early only if that many bytes arrive, and what
+        came is read at the end without a wait.
+        """
+        if timeout_s > 0:
+            select.select([self._port if self._fd is None else self._fd], [], [], timeout_s)
+        return self.read(MAX_VMIN, 0.0)
+
     def _read_descriptor(self, count: int, timeout_s: float, at_least: int) -> bytes:
         """
-        :meth:`_read_some` on a local POSIX port: ``os.read`` on its non-blocking descriptor.
+        :meth:`read` on a local POSIX port: ``os.read`` on its non-blocking descriptor.
 
         pyserial's ``read`` costs a ``select`` and its timeout bookkeeping on every call, even
         when the bytes are there; this is the bus thread's most frequent call. What is there
@@ -300,48 +282,3 @@ class SerialPortTransport(Transport):
             self._terminal[6][termios.VMIN] = count
             termios.tcsetattr(self._fd, termios.TCSANOW, self._terminal)
             self._vmin = count
-
-    def _await_bytes(self, count: int, char_s: float, deadline: float) -> None:
-        """
-        Sleep until ``count`` more bytes can have crossed the wire, unless they are there.
-
-        A reply cannot arrive faster than its wire time: one sleep instead of a wake-up per
-        byte or per USB batch. On a link that does not pace bytes (a pty, TCP) they are
-        already there and nothing waits. A port with VMIN needs no sleep: the read that
-        follows wakes once, when the bytes are there.
-        """
-        if self._terminal is not None:
-            return
-        waiting = self._port.in_waiting
-        if waiting >= count:
-            return
-        # Wake a little early: bytes reach us in batches (USB adapters, the pacer), and the
-        # read that follows waits for the last batch itself.
-        pause_s = min((count - waiting) * char_s - max(2 * char_s, EARLY_WAKE_S),
-                      deadline - time.monotonic())
-        if pause_s > 0.0005:
-            time.sleep(pause_s)
-
-    def _drain(self, deadline: float, silence_s: float) -> None:
-        """
-        Drop what still arrives after a bad reply, until ``silence_s`` of silence.
-
-        Bounded by the transaction's deadline (at least a few silences from now): a line
-        that is still talking then is babbling (another master, or a faulty device), a link
-        fault of its own kind rather than one more bad reply.
-        """
-        silence_s = max(MIN_DRAIN_SILENCE_S, silence_s)
-        limit = max(deadline, time.monotonic() + 4 * silence_s)
-        dropped = 0
-        while True:
-            # A full silence each time (never cut short by the limit, which would take a
-            # late wait for a pause): bounded by the limit plus one silence.
-            chunk = self._read_some(256, silence_s)
-            if not chunk:
-                return
-            dropped += len(chunk)
-            if time.monotonic() >= limit:
-                raise LineBabble(f'bus offline: {self.settings.describe()}: the line keeps '
-                                 f'talking ({dropped} bytes past a bad reply, no pause within '
-                                 f'the {self.settings.timeout_s:g} s transaction): another '
-                                 'master or a faulty device is sending')

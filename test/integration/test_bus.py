@@ -6,11 +6,9 @@ from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import CommandRefused
 from drive_bridge.transport.engines import make_transport
-from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
-from drive_bridge.transport.protocols import SERIAL_ENGINES
+from drive_bridge.transport.link import LinkSettings
 from fakes import kind, message
 from integration_helpers import wait_until
-from pymodbus_use import marked_params
 import pytest
 
 
@@ -18,14 +16,14 @@ SLACK_TIMEOUT_S = 2.0  # the reply timeout of the tests that check behaviour, no
 
 
 def start_bus(sim_bus, timeout_s, with_dead_device=True, timing=BusTiming(backoff_max_s=2.0)):
-    """Start a bus on pymodbus's serial client (the tests that use it are marked pymodbus)."""
+    """Start a bus on the native RTU engine."""
     events = []
     specs = [DeviceSpec('main', 20, McdProfile('auto'), poll_rate_hz=20.0),
              DeviceSpec('aux', 21, McdProfile('mcd202'), poll_rate_hz=20.0)]
     if with_dead_device:
         specs.append(DeviceSpec('dead', 22, McdProfile('mcd500'), poll_rate_hz=20.0))
-    transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N',
-                                             timeout_s=timeout_s))
+    transport = make_transport(LinkSettings(port=sim_bus.pty_path, parity='N',
+                                            timeout_s=timeout_s))
     master = BusMaster(transport, specs, timing, listener=events.append)
     master.events = events
     return master.start()
@@ -74,21 +72,19 @@ def readings(master, name):
 
 
 @pytest.mark.realtime  # 12 polls a second beside a dead device: its threads must run on time
-@pytest.mark.pymodbus
 def test_dead_device_offline_others_polled(quick_bus):
     bus = quick_bus
     assert wait_until(lambda: bus.snapshot('dead').online is False, 3.0)
     main, aux = len(readings(bus, 'main')), len(readings(bus, 'aux'))
     # 20 Hz asked; the dead device costs one 0.3 s timeout per backoff period at most. Over
     # 3 s, not 1: beside a CPU hog one stall of the machine (0.3-0.7 s seen) took a third of
-    # a 1 s window with pymodbus 3.6.9 (7 polls), not of the bus's share of the line.
+    # a 1 s window (7 polls), not of the bus's share of the line.
     time.sleep(3.0)
     assert len(readings(bus, 'main')) - main >= 3 * 12
     assert len(readings(bus, 'aux')) - aux > 3 * 10
     assert bus.snapshot('main').model == 'mcd500'  # auto from register 40007
 
 
-@pytest.mark.pymodbus
 def test_start_stop_sequence_with_acknowledgement(bus_beside_a_dead_device, sim_bus):
     bus = bus_beside_a_dead_device
     # Ramps of 3 s: a probe of the dead device holds the line for 2 s at most between polls.
@@ -107,7 +103,6 @@ def test_start_stop_sequence_with_acknowledgement(bus_beside_a_dead_device, sim_
     assert compact == ['ready', 'starting', 'running', 'stopping', 'ready']
 
 
-@pytest.mark.pymodbus
 def test_trip_then_reset(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('aux').online, 3.0)
     with sim_bus.lock:
@@ -120,7 +115,6 @@ def test_trip_then_reset(bus, sim_bus):
     assert wait_until(lambda: readings(bus, 'aux')[-1].state == 'ready', 3.0)
 
 
-@pytest.mark.pymodbus
 def test_hand_on_refusal_reason(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('main').online, 3.0)
     sim_bus.devices[20].model.hand_on = True
@@ -131,7 +125,6 @@ def test_hand_on_refusal_reason(bus, sim_bus):
     assert list(sim_bus.devices[20].model.commands_received) == []
 
 
-@pytest.mark.pymodbus
 def test_parameters_by_number(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('main').online, 3.0)
     assert bus.read_parameter('main', 1).result(timeout=3) == 100  # par. 1-1 FLC = 100 A
@@ -140,10 +133,9 @@ def test_parameters_by_number(bus, sim_bus):
     assert bus.read_parameter('main', 4).result(timeout=3) == 400
 
 
-@pytest.mark.pymodbus
 def test_model_mismatch_refuses_commands(sim_bus):
     spec = DeviceSpec('wrong', 21, McdProfile('mcd500'), poll_rate_hz=20.0)
-    transport = ModbusTransport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.3))
+    transport = make_transport(LinkSettings(port=sim_bus.pty_path, parity='N', timeout_s=0.3))
     master = BusMaster(transport, [spec]).start()
     try:
         assert wait_until(lambda: 'mismatch' in master.snapshot('wrong').status_text, 3.0)
@@ -154,7 +146,6 @@ def test_model_mismatch_refuses_commands(sim_bus):
         master.shutdown(stop_motors=False)
 
 
-@pytest.mark.pymodbus
 def test_refused_polls_show_as_such_and_never_as_current_values(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('main').reading is not None, 3.0)
     model = sim_bus.devices[20].model
@@ -174,7 +165,6 @@ def test_refused_polls_show_as_such_and_never_as_current_values(bus, sim_bus):
     assert bus.snapshot('main').poll_failure == ''
 
 
-@pytest.mark.pymodbus
 def test_a_single_busy_refusal_is_counted_not_a_change_of_state(bus, sim_bus):
     assert wait_until(lambda: bus.snapshot('aux').reading is not None, 3.0)
     events = len(bus.events)
@@ -185,14 +175,13 @@ def test_a_single_busy_refusal_is_counted_not_a_change_of_state(bus, sim_bus):
                 kind(e) in ('error', 'offline')]
 
 
-@pytest.mark.parametrize('engine', marked_params(SERIAL_ENGINES))
-def test_a_bus_restarted_on_a_pty_with_parity_e_is_online_every_time(sim_bus, engine):
+def test_a_bus_restarted_on_a_pty_with_parity_e_is_online_every_time(sim_bus):
     # A restarted node opened the simulator's pty with parity E once; every later start
     # found the link offline with "(22, 'Invalid argument')".
     settings = LinkSettings(port=sim_bus.pty_path, parity='E', timeout_s=0.3)
     for _ in range(3):
         events = []
-        master = BusMaster(make_transport(settings, {'serial_engine': engine}),
+        master = BusMaster(make_transport(settings),
                            [DeviceSpec('main', 20, McdProfile('auto'), poll_rate_hz=20.0)],
                            BusTiming(backoff_max_s=2.0), listener=events.append)
         master.start()

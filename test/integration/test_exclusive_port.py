@@ -5,7 +5,6 @@ from drive_bridge.errors import LinkDown
 from drive_bridge.protocol.requests import ReadCoils
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.transport.port_owner import lock_holders
-from pymodbus_use import marked_params
 import pytest
 
 
@@ -18,27 +17,24 @@ def line():
     server.stop()
 
 
-def transport(line, engine='native', protocol='modbus_rtu'):
+def transport(line, protocol='modbus_rtu'):
     values = {'port': line.pty_path, 'parity': 'N', 'protocol': protocol, 'devices': ['a']}
-    if protocol == 'modbus_rtu':
-        values['serial_engine'] = engine
-    config = cfg.build_config(values, {'a': {'family': 'fc' if protocol == 'modbus_rtu'
-                                             else 'mcd', 'address': 1, 'model': 'auto'}})
+    family = {'modbus_rtu': 'fc', 'ap_ascii': 'mcd', 'fc_protocol': 'fc'}[protocol]
+    config = cfg.build_config(values, {'a': {'family': family, 'address': 1, 'model': 'auto'}})
     return config.make_transport()
 
 
-OPENERS = marked_params([('modbus_rtu', 'native'), ('modbus_rtu', 'pymodbus'), ('ap_ascii', None)],
-                        lambda opener: opener[1] == 'pymodbus')
+OPENERS = ('modbus_rtu', 'ap_ascii', 'fc_protocol')
 
 
 @pytest.mark.parametrize('first', OPENERS)
 @pytest.mark.parametrize('second', OPENERS)
 def test_a_second_opener_of_one_pty_is_refused_naming_the_owner(line, first, second):
-    holder = transport(line, first[1], first[0])
+    holder = transport(line, first)
     holder.connect()
     try:
         assert lock_holders(line.pty_path)  # the lock is there for others to see
-        other = transport(line, second[1], second[0])
+        other = transport(line, second)
         with pytest.raises(LinkDown) as refused:
             other.connect()
         text = str(refused.value)
@@ -48,7 +44,7 @@ def test_a_second_opener_of_one_pty_is_refused_naming_the_owner(line, first, sec
     finally:
         holder.close()
     assert not lock_holders(line.pty_path)
-    again = transport(line, second[1], second[0])
+    again = transport(line, second)
     again.connect()  # free once the holder closed it
     again.close()
 

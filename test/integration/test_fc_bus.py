@@ -10,10 +10,8 @@ from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.transport.engines import make_transport
-from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
-from drive_bridge.transport.protocols import SERIAL_ENGINES
+from drive_bridge.transport.link import LinkSettings
 from integration_helpers import wait_until
-from pymodbus_use import marked_params
 import pytest
 
 FAST = {'fc': {'ramp_up_s': 0.5, 'ramp_down_s': 0.5}}
@@ -28,12 +26,11 @@ def sim():
     server.stop()
 
 
-@pytest.fixture(params=marked_params(SERIAL_ENGINES))
-def transport(sim, request):
+@pytest.fixture
+def transport(sim):
     # 2 s: no test here times a reply, and a busy machine can hold the simulator up (the
     # virtual machine itself stalled for over 1 s once beside a CPU hog)
-    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=2.0),
-                               {'serial_engine': request.param})
+    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=2.0))
     transport.connect()
     yield transport
     transport.close()
@@ -69,15 +66,14 @@ def test_exception_04_then_register_7(transport):
     assert transport.execute(1, ReadRegisters(6, 1)) == [1]  # no write access
 
 
-@pytest.mark.pymodbus
 @pytest.mark.parametrize('parity', ['E', 'O'])
 def test_fc_over_socket_url_with_parity(parity):
     server = make_sim_server({1: 'fc51'})
     port = server.open_tcp(framing='rtu')
     server.start()
     try:
-        transport = ModbusTransport(LinkSettings(port=f'socket://127.0.0.1:{port}',
-                                                 parity=parity, timeout_s=0.3))
+        transport = make_transport(LinkSettings(port=f'socket://127.0.0.1:{port}',
+                                                parity=parity, timeout_s=0.3))
         transport.connect()
         assert transport.execute(1, WriteCoils(0, words.words_to_coils([0x043C, 0]))) is None
         assert len(transport.execute(1, ReadCoils(32, 32))) == 32
@@ -93,7 +89,7 @@ def bus(sim):
         {'conv': {'family': 'fc', 'address': 1, 'poll_rate': 20.0, 'speed_reference': 40.0,
                   'comms_timeout': 2.0, 'comms_timeout_function': 2},
          'main': {'family': 'mcd', 'address': 20, 'poll_rate': 10.0}})
-    master = BusMaster(ModbusTransport(config.link), [d.make_spec() for d in config.devices],
+    master = BusMaster(config.make_transport(), [d.make_spec() for d in config.devices],
                        BusTiming(backoff_max_s=2.0, frame_gap_s=config.timing.frame_gap_s))
     master.start()
     assert wait_until(lambda: master.snapshot('conv').online, 3.0)
@@ -106,7 +102,6 @@ def state(bus):
     return reading.state if reading else None
 
 
-@pytest.mark.pymodbus  # the bus fixture's transport
 def test_drive_and_starter_on_one_bus(bus, sim):
     drive = sim.devices[1].model
     assert wait_until(lambda: drive.parameters[803] == 20 and drive.parameters[804] == 2, 2.0)
@@ -128,7 +123,6 @@ def test_drive_and_starter_on_one_bus(bus, sim):
     assert drive.output_pct == 0.0
 
 
-@pytest.mark.pymodbus
 def test_alarm_trip_reset_and_parameters(bus, sim):
     drive = sim.devices[1].model
     with sim.lock:

@@ -167,7 +167,10 @@ def test_a_missing_port_is_link_down_with_its_name():
 
 # -- fake ports: a babbling line, random bytes ------------------------------------------
 class FakePort:
-    """A port whose reads return ``incoming`` (then silence), or babble for ``babble_s``."""
+    """
+    A port whose reads return ``incoming`` once a telegram was written (then silence), or
+    babble for ``babble_s``.
+    """
 
     def __init__(self, incoming: bytes = b'', babble_s: float = 0.0):
         self.incoming = bytearray(incoming)
@@ -178,8 +181,8 @@ class FakePort:
     def read(self, count: int) -> bytes:
         if time.monotonic() < self.babble_until:
             return b'\xFF' * count
-        data = bytes(self.incoming[:count])
-        del self.incoming[:count]
+        data = bytes(self.incoming[:count]) if self.written else b''
+        del self.incoming[:len(data)]
         return data
 
     def write(self, data: bytes) -> None:
@@ -190,7 +193,7 @@ class FakePort:
 
     @property
     def in_waiting(self) -> int:
-        return len(self.incoming)
+        return len(self.incoming) if self.written else 0
 
     def fileno(self) -> int:
         return always_readable_fd()

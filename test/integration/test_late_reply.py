@@ -1,160 +1,236 @@
 """
-A late reply that reaches the master together with the reply asked for (issue 27).
+Late replies on real ptys and TCP: a reply counts only when it answers its own request.
 
-A device (or the simulator, starved on a loaded machine) answers request A only after the
-master gave up on it and sent request B; both replies then arrive at once. Seen beside a CPU
-hog: the simulator's thread read four requests in one read after 1.1 s and answered them
-back to back. The reply asked for must be taken, and a late reply must never be taken for
-it: RTU has no transaction id, and devices answer in order, so of whole replies that arrive
-back to back the last one is the newest (both engines take it).
+A scripted device (test/late_line.py) answers after the master's timeout, holds a reply
+until the next request, or puts another unit's frame on the line. Whatever it does, the
+transports of every wire (Modbus RTU on a pty and over TCP, AP ASCII, the FC protocol) return
+the answer to the request just sent or fail; they never return another request's values,
+and every frame they discard is counted against the unit it names (issue 40).
 """
 
-import contextlib
-import os
-import threading
-import time
+from contextlib import contextmanager
 
-from drive_bridge.errors import TransportError
-from drive_bridge.protocol import rtu
-from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
-from drive_bridge.sim.pty_link import PtyLink
+from drive_bridge.errors import (
+    AmbiguousReply, BadFrame, NoResponse, TransportError)
+from drive_bridge.protocol import ap_ascii, rtu
+from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol.requests import AsciiCommand, ReadRegisters, WriteRegister
 from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.link import LinkSettings
-from drive_bridge.transport.modbus import PYMODBUS_VERSION
-from drive_bridge.transport.protocols import SERIAL_ENGINES
-from pymodbus_use import marked_params
+from integration_helpers import wait_until
+from late_line import (
+    answer_of, ascii_requests, fc_requests, registers_of, rtu_requests, ScriptedDeviceLine)
 import pytest
 
-TIMEOUT_S = 0.3
+TIMEOUT_S = 0.15
+ACK = bytes([ap_ascii.ACK])
 
 
-def read_request(fd: int) -> rtu.RtuFrame:
-    """Return the next whole request read from the pty master ``fd``."""
-    buffer = b''
-    while True:
-        buffer += os.read(fd, 256)
-        result = rtu.decode_request(buffer)
-        if result.frame is not None:
-            return result.frame
-
-
-def answer(frame: rtu.RtuFrame) -> bytes:
-    """Return a device's reply: registers 100 * address + i, or a write's echo."""
-    if frame.function == rtu.READ_HOLDING_REGISTERS:
-        address, count = rtu.parse_address_count(frame.data)
-        return rtu.registers_response(
-            frame.unit, frame.function, [address * 100 + i for i in range(count)]).encode()
-    return frame.encode()
-
-
-def withholding_device(fd: int, withheld: int) -> None:
-    """Withhold the replies to the first ``withheld`` requests; send them with the next one's."""
-    requests = [read_request(fd) for _ in range(withheld + 1)]
-    os.write(fd, b''.join(answer(request) for request in requests))
-
-
-def late_then_on_time_device(fd: int, master_gave_up: threading.Event) -> None:
-    """Answer the first request once the master gave up on it, the second one at once."""
-    late = read_request(fd)
-    master_gave_up.wait(5.0)
-    os.write(fd, answer(late))
-    os.write(fd, answer(read_request(fd)))
-
-
-@contextlib.contextmanager
-def device_line(engine: str, device, *args):
-    """Yield a connected transport of ``engine`` and a pty whose other end ``device`` runs."""
-    pty = PtyLink()
-    os.set_blocking(pty.master, True)
-    thread = threading.Thread(target=device, args=(pty.master, *args), daemon=True)
-    thread.start()
-    transport = make_transport(LinkSettings(port=pty.path, parity='N', timeout_s=TIMEOUT_S),
-                               {'serial_engine': engine})
+@contextmanager
+def scripted(script, decode=rtu_requests, tcp=False, **settings):
+    """Yield (connected transport, line) with a device answering by ``script(line, i, req)``."""
+    holder = {}
+    line = ScriptedDeviceLine(decode, lambda index, request: script(holder['line'], index,
+                                                                    request), tcp=tcp)
+    holder['line'] = line
+    values = dict(timeout_s=TIMEOUT_S, parity='N')
+    values.update(settings)
+    if tcp:
+        values.update(protocol='rtu_over_tcp', tcp_port=line.tcp_port)
+    else:
+        values.update(port=line.path)
+    transport = make_transport(LinkSettings(**values))
     transport.connect()
     try:
-        yield transport
+        yield transport, line
     finally:
         transport.close()
-        thread.join(2.0)
-        pty.close()
+        line.close()
 
 
-def run_withheld(engine: str, *transactions):
-    """Run transactions, every reply withheld until the last one's; return (outcome, counts)."""
-    with device_line(engine, withholding_device, len(transactions) - 1) as transport:
-        for transaction in transactions[:-1]:
-            with pytest.raises(TransportError, match='no reply'):
-                transport.execute(*transaction)
-        try:
-            outcome = transport.execute(*transactions[-1])
-        except TransportError as error:
-            outcome = error
-        return outcome, transport.last_recovered
+def outcome(transport, unit, request):
+    """Return what ``execute`` returned, or the TransportError it raised."""
+    try:
+        return transport.execute(unit, request)
+    except TransportError as error:
+        return error
 
 
-def waiting_port(transport):
-    """Return the open port of a serial transport of either engine (None: it is closed)."""
-    return transport._port if hasattr(transport, '_port') else transport._client.socket
+def late_units(transport):
+    return [frame.unit for frame in transport.last_report.late]
 
 
-# pymodbus 3.6 closes the port after a transaction without a reply and opens it again for the
-# next request; pyserial's open flushes what came meanwhile, so those bytes go uncounted.
-CLOSES_AFTER_NO_REPLY = {'pymodbus': PYMODBUS_VERSION.startswith('3.6.')}
+def values_of(request: ReadRegisters):
+    return [1000 + request.address + i for i in range(request.count)]
 
 
-ENGINES = marked_params(SERIAL_ENGINES)
+# -- Modbus RTU ---------------------------------------------------------------------------
+def test_a_steady_lag_never_returns_another_reads_values_and_each_late_reply_is_counted():
+    """Every reply comes 20 ms after the timeout: 20 reads of distinct blocks all fail."""
+    def lagging(line, index, request):
+        return [(TIMEOUT_S + 0.02, answer_of(request))]
+    counted = 0
+    with scripted(lagging) as (transport, line):
+        for block in range(20):
+            result = outcome(transport, 20, ReadRegisters(10 * block, 3))
+            assert isinstance(result, NoResponse), f'read {block} returned {result}'
+            counted += late_units(transport).count(20)
+    assert counted == 20  # each late reply read, discarded and counted in its quarantine
 
 
-@pytest.mark.parametrize('engine', ENGINES)
-def test_a_write_answered_behind_another_units_late_reply_is_done(engine):
-    """A write the device executed and answered is not reported failed (nor resent)."""
-    outcome, recovered = run_withheld(engine, (21, ReadRegisters(2, 6)), (20, WriteRegister(0, 1)))
-    assert outcome is None, outcome
-    assert recovered.get('late_reply') == 1
+def hold_first(replies_after_s):
+    """
+    Hold the replies to all requests but the last; send them when the last one comes, then
+    its own answer ``replies_after_s[-1]`` later (a device or gateway that holds replies).
+    """
+    held = []
+
+    def script(line, index, request):
+        if index < len(replies_after_s) - 1:
+            held.append(answer_of(request))
+            return []
+        return [(0.0, b''.join(held)), (replies_after_s[-1], answer_of(request))]
+    return script
 
 
-@pytest.mark.parametrize('engine', ENGINES)
-def test_a_late_reply_of_the_same_unit_is_never_taken_as_current_values(engine):
-    """The late reply to a read of registers 2-7 is not the reply to a read of 10-15."""
-    outcome, _ = run_withheld(engine, (20, ReadRegisters(2, 6)), (20, ReadRegisters(10, 6)))
-    assert outcome == [1000 + i for i in range(6)] or isinstance(outcome, TransportError), \
-        f'stale values taken as current: {outcome}'
+@pytest.mark.parametrize('after_s', [0.0, 0.001, 0.005, 0.02])
+def test_a_held_reply_then_ours_is_ours_or_an_error_never_stale(after_s):
+    with scripted(hold_first([None, after_s])) as (transport, line):
+        assert isinstance(outcome(transport, 20, ReadRegisters(2, 6)), NoResponse)
+        second = ReadRegisters(10, 6)
+        result = outcome(transport, 20, second)
+    assert result == values_of(second) or isinstance(result, BadFrame), result
+    assert result != values_of(ReadRegisters(2, 6))
 
 
-@pytest.mark.parametrize('engine', ENGINES)
-def test_of_three_replies_that_arrive_at_once_the_last_is_taken(engine):
-    """Devices answer in order: the last whole reply answers the request just sent."""
-    outcome, recovered = run_withheld(engine, (20, ReadRegisters(2, 6)),
-                                      (20, ReadRegisters(30, 6)), (20, ReadRegisters(10, 6)))
-    assert outcome == [1000 + i for i in range(6)], f'a late reply taken: {outcome}'
-    assert recovered == {'late_reply': 2}
+def test_three_replies_at_once_are_ours_or_an_error_never_stale():
+    with scripted(hold_first([None, None, 0.002])) as (transport, line):
+        assert isinstance(outcome(transport, 20, ReadRegisters(2, 6)), NoResponse)
+        assert isinstance(outcome(transport, 20, ReadRegisters(30, 6)), NoResponse)
+        result = outcome(transport, 20, ReadRegisters(10, 6))
+    assert isinstance(result, AmbiguousReply), result
 
 
-@pytest.mark.parametrize('engine', ENGINES)
-def test_one_reply_and_nothing_after_it_is_taken_as_before(engine):
-    """The clean path: the reply is taken, nothing counts as late, no wait for more."""
-    with device_line(engine, withholding_device, 0) as transport:
-        started = time.monotonic()
-        assert transport.execute(20, ReadRegisters(10, 6)) == [1000 + i for i in range(6)]
-        assert time.monotonic() - started < TIMEOUT_S  # not a timeout's wait for more
-        assert transport.last_recovered == {}
+def test_another_units_frame_ahead_of_the_write_echo_is_counted_and_the_write_done():
+    late = registers_of(rtu.read_registers_request(21, 2, 3))
+
+    def echoing(line, index, request):  # the adapter's echo, after a frame already on the line
+        return [(0.0, late + request.encode()), (0.01, answer_of(request))]
+    with scripted(echoing, local_echo=True) as (transport, line):
+        assert transport.execute(20, WriteRegister(1, 1)) is None
+        assert late_units(transport) == [21]
 
 
-@pytest.mark.parametrize('engine', ENGINES)
-def test_bytes_that_came_after_a_transaction_ended_are_counted_at_the_next_request(engine):
-    """A reply after its timeout is dropped before the next request and counted once."""
-    master_gave_up = threading.Event()
-    with device_line(engine, late_then_on_time_device, master_gave_up) as transport:
-        with pytest.raises(TransportError, match='no reply'):
-            transport.execute(20, ReadRegisters(2, 6))
-        port = waiting_port(transport)
-        assert (port is None) == CLOSES_AFTER_NO_REPLY.get(engine, False)
-        if port is None:  # open it now, as pymodbus 3.6 does with the next request
-            transport._client.connect()
-            port = waiting_port(transport)
-        master_gave_up.set()
-        deadline = time.monotonic() + 5.0
-        while port.in_waiting < 17 and time.monotonic() < deadline:
-            time.sleep(0.001)  # until the late reply is in the port (the event is the pty's)
-        assert transport.execute(20, ReadRegisters(10, 6)) == [1000 + i for i in range(6)]
-        assert transport.last_recovered == {'late_bytes': 1}
+def test_of_two_identical_writes_the_one_whose_echo_came_with_a_held_one_is_unanswered():
+    with scripted(hold_first([None, 0.005])) as (transport, line):
+        assert isinstance(outcome(transport, 20, WriteRegister(1, 1)), NoResponse)
+        result = outcome(transport, 20, WriteRegister(1, 1))
+    assert isinstance(result, AmbiguousReply), result
+
+
+def test_a_late_reply_of_another_unit_leaves_ours_taken_and_is_counted_against_it():
+    def script(line, index, request):
+        if index == 0:
+            return [(TIMEOUT_S + 0.3, answer_of(request))]  # after its own guard
+        return [(0.02, answer_of(request))]
+    with scripted(script, reply_guard_s=0.05) as (transport, line):
+        assert isinstance(outcome(transport, 21, ReadRegisters(2, 3)), NoResponse)
+        # the late reply of 21 comes 0.3 s after the timeout, in one of these transactions
+        results = [outcome(transport, 20, ReadRegisters(10 * i, 3)) for i in range(1, 6)]
+    assert all(result == values_of(ReadRegisters(10 * i, 3)) or isinstance(result, BadFrame)
+               for i, result in zip(range(1, 6), results)), results
+    assert any(isinstance(result, list) for result in results)
+
+
+# -- RTU over TCP -------------------------------------------------------------------------
+def test_rtu_over_tcp_a_late_reply_between_transactions_is_never_the_next_answer():
+    """It arrives 50 ms before the next request: discarded, counted, the line quarantined."""
+    def script(line, index, request):
+        if index == 0:
+            return [(TIMEOUT_S + 0.05, answer_of(request))]
+        return [(0.01, answer_of(request))]
+    with scripted(script, tcp=True, reply_guard_s=0.01) as (transport, line):
+        assert isinstance(outcome(transport, 20, ReadRegisters(2, 6)), NoResponse)
+        assert wait_until(lambda: line.written, 2.0)  # on the socket before the next request
+        second = ReadRegisters(10, 6)
+        assert transport.execute(20, second) == values_of(second)
+        assert late_units(transport) == [20]
+
+
+def test_rtu_over_tcp_a_held_reply_with_ours_is_an_error_never_stale():
+    with scripted(hold_first([None, 0.005]), tcp=True) as (transport, line):
+        assert isinstance(outcome(transport, 20, ReadRegisters(2, 6)), NoResponse)
+        result = outcome(transport, 20, ReadRegisters(10, 6))
+    assert isinstance(result, BadFrame), result
+
+
+def test_rtu_over_tcp_another_units_late_frame_does_not_lose_ours():
+    late = registers_of(rtu.read_registers_request(21, 2, 3))
+
+    def script(line, index, request):
+        return [(0.005, late), (0.05, answer_of(request))]
+    with scripted(script, tcp=True) as (transport, line):
+        request = ReadRegisters(10, 6)
+        assert transport.execute(20, request) == values_of(request)
+        assert late_units(transport) == [21]
+
+
+# -- AP ASCII: replies name no unit ---------------------------------------------------------
+def ascii_script(late_b10_s):
+    """A starter that ACKs everything; B10's ACK is held (None) or sent ``late_b10_s`` late."""
+    def script(line, index, fragment):
+        if fragment.kind == 'message' and fragment.code == 'B10':
+            if late_b10_s is None:
+                line.held += ACK
+                return []
+            return [(late_b10_s, ACK)]
+        return [(0.01, ACK)]
+    return script
+
+
+def test_a_stop_after_a_start_whose_ack_was_held_is_not_acknowledged():
+    with scripted(ascii_script(None), ascii_requests, protocol='ap_ascii',
+                  timeout_s=0.25) as (transport, line):
+        assert isinstance(outcome(transport, 20, AsciiCommand('B10')), NoResponse)
+        result = outcome(transport, 20, AsciiCommand('B12'))
+        b12_sent = [fragment for _, fragment in line.requests
+                    if fragment.kind == 'message' and fragment.code == 'B12']
+    assert isinstance(result, AmbiguousReply), result  # two ACKs to the address
+    assert b12_sent == []  # and the stop's own fragment never went out
+
+
+def test_a_start_whose_ack_came_late_leaves_the_stop_to_its_own_ack():
+    with scripted(ascii_script(0.25 + 0.05), ascii_requests, protocol='ap_ascii',
+                  timeout_s=0.25) as (transport, line):
+        assert isinstance(outcome(transport, 20, AsciiCommand('B10')), NoResponse)
+        assert late_units(transport) == [None]  # the late ACK, read in the quarantine
+        assert transport.execute(20, AsciiCommand('B12')) is None
+
+
+# -- FC protocol: process data echoes nothing -------------------------------------------------
+def fc_answer(telegram: fc.FcTelegram) -> bytes:
+    return fc.reply_to(telegram, 0x0607, telegram.pcd2).encode()  # MAV = the reference
+
+
+def test_late_fc_process_data_is_never_taken():
+    def script(line, index, telegram):
+        if index == 0:
+            line.held += fc_answer(telegram)
+            return []
+        return [(0.01, fc_answer(telegram))]
+    with scripted(script, fc_requests, protocol='fc_protocol') as (transport, line):
+        assert isinstance(outcome(transport, 1, fc.process_request(0x047C, 0x1111)),
+                          NoResponse)
+        result = outcome(transport, 1, fc.process_request(0x047C, 0x2222))
+    assert isinstance(result, AmbiguousReply), result
+
+
+def test_a_late_fc_reply_in_the_guard_is_discarded_and_the_next_answer_is_its_own():
+    def script(line, index, telegram):
+        delay_s = TIMEOUT_S + 0.02 if index == 0 else 0.01
+        return [(delay_s, fc_answer(telegram))]
+    with scripted(script, fc_requests, protocol='fc_protocol') as (transport, line):
+        assert isinstance(outcome(transport, 1, fc.process_request(0x047C, 0x1111)),
+                          NoResponse)
+        assert late_units(transport) == [1]
+        assert transport.execute(1, fc.process_request(0x047C, 0x2222)).pcd2 == 0x2222

@@ -7,8 +7,6 @@ from drive_bridge.sim.mcd_model import READY, RUNNING, TRIPPED
 from integration_helpers import wait_until
 import pytest
 
-pytestmark = pytest.mark.pymodbus  # Modbus TCP and RTU over TCP run through pymodbus
-
 SLAVES = {0: ('mcd202', 100, 'extended'), 10: ('mcd201', 110, 'basic')}
 DEVICES = {
     'conveyor': {'family': 'lvsg', 'model': 'auto', 'address': 1, 'poll_rate': 20.0,
@@ -19,7 +17,8 @@ DEVICES = {
 }
 
 
-@pytest.fixture(params=['modbus_tcp', 'rtu_over_tcp'])
+@pytest.fixture(params=[pytest.param('modbus_tcp', marks=pytest.mark.pymodbus),
+                        'rtu_over_tcp'])  # Modbus TCP runs through pymodbus
 def gateway(request):
     server = make_lvsg_gateway(SLAVES, start_time_s=0.3, stop_time_s=0.3)
     port = server.open_tcp(framing='mbap' if request.param == 'modbus_tcp' else 'rtu')

@@ -1,15 +1,14 @@
-"""pymodbus (pinned and 3.6.9) and the bus against the simulated VLT 6000 option card."""
+"""The native RTU engine and the bus against the simulated VLT 5000/6000 option card."""
 
 from drive_bridge.bus.master import BusMaster, BusTiming
 from drive_bridge.config import build_config
 from drive_bridge.errors import CommandRefused, DeviceException
 from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.sim.devices import make_sim_server
-from drive_bridge.transport.modbus import LinkSettings, ModbusTransport
+from drive_bridge.transport.engines import make_transport
+from drive_bridge.transport.link import LinkSettings
 from integration_helpers import wait_until
 import pytest
-
-pytestmark = pytest.mark.pymodbus  # every test here runs on ModbusTransport
 
 
 @pytest.fixture
@@ -23,7 +22,7 @@ def sim():
 
 
 def test_option_card_exception_codes_come_back_as_they_are(sim):
-    transport = ModbusTransport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=0.2))
+    transport = make_transport(LinkSettings(port=sim.pty_path, parity='N', timeout_s=0.2))
     transport.connect()
     try:
         with pytest.raises(DeviceException) as error:  # code 0: no such parameter
@@ -43,7 +42,7 @@ def test_two_vlt_models_on_one_bus(sim):
                  'speed_reference': 40.0, 'comms_timeout': 1.5,
                  'drive_link_timeout': 0.8},
          'pump': {'family': 'vlt', 'model': 'vlt5000', 'address': 2, 'poll_rate': 10.0}})
-    bus = BusMaster(ModbusTransport(config.link), [d.make_spec() for d in config.devices],
+    bus = BusMaster(config.make_transport(), [d.make_spec() for d in config.devices],
                     BusTiming(backoff_max_s=2.0))
     bus.start()
     try:

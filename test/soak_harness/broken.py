@@ -44,12 +44,16 @@ DROPPED_WRITE_SHARE = 0.2
 
 @contextlib.contextmanager
 def _patched(owner: type, name: str, replacement) -> Iterator[None]:
-    original = owner.__dict__[name]
+    own = name in owner.__dict__  # else inherited: the patch is removed again afterwards
+    original = owner.__dict__.get(name)
     setattr(owner, name, replacement)
     try:
         yield
     finally:
-        setattr(owner, name, original)
+        if own:
+            setattr(owner, name, original)
+        else:
+            delattr(owner, name)
 
 
 def _unanswered_keeps_start():

@@ -24,7 +24,7 @@ from drive_bridge.sim.mcd_model import McdModel, McdSimConfig
 from drive_bridge.transport.ap_ascii import ApAsciiTransport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
-from fakes import drive_cycle, ScriptedPort
+from fakes import drive_cycle, FakeClock, ScriptedLine
 from hypothesis import given, HealthCheck, settings, strategies as st
 
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
@@ -100,9 +100,12 @@ def test_response_decoder_reads_a_reply_arriving_in_pieces(case, data):
 
 
 def _transport(kind, reply: bytes):
-    settings_ = LinkSettings(protocol='modbus_rtu', port='/dev/null', timeout_s=0.001)
-    transport = kind(settings_, open_port=lambda *args, **kwargs: ScriptedPort(reply))
-    transport._port = ScriptedPort(reply)
+    """Return a transport of ``kind`` whose line answers every request with ``reply``."""
+    settings_ = LinkSettings(protocol='modbus_rtu', port='/dev/null', timeout_s=0.05)
+    clock = FakeClock()
+    line = ScriptedLine(clock, lambda request, now: [(0.001, reply)])
+    transport = kind(settings_, clock=clock, line=line)
+    transport.connect()
     return transport
 
 

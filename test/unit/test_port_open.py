@@ -6,7 +6,6 @@ import termios
 from drive_bridge.errors import LinkDown
 from drive_bridge.transport.fc_protocol import FcProtocolTransport
 from drive_bridge.transport.link import LinkSettings, port_framing, PortFraming
-from drive_bridge.transport.modbus import ModbusTransport
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
 import pytest
 import serial
@@ -57,17 +56,6 @@ def test_the_fc_protocol_names_the_settings_refused_too(port):
     with pytest.raises(LinkDown) as raised:
         transport.connect()
     assert str(raised.value) == refused(port, 9600, 'O', 2)
-
-
-@pytest.mark.pymodbus
-def test_the_pymodbus_engine_names_the_settings_refused_though_pymodbus_only_logs_it(
-        port, monkeypatch):
-    monkeypatch.setattr(serial, 'serial_for_url', refusing)  # pymodbus opens through it too
-    transport = ModbusTransport(LinkSettings(port=port, parity='N', stopbits=1))
-    with pytest.raises(LinkDown) as raised:
-        transport.connect()
-    assert str(raised.value) == refused(port, 9600, 'N', 1)
-    assert not transport.connected
 
 
 def test_a_port_that_is_no_pty_is_opened_with_the_link_s_framing(port):

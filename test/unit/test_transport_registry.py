@@ -25,11 +25,10 @@ def pymodbus_case(*case):
 @pytest.mark.parametrize('protocol, options, expected', [
     ('modbus_rtu', {}, RtuSerialTransport),
     ('modbus_rtu', {'serial_engine': 'native'}, RtuSerialTransport),
-    pymodbus_case('modbus_rtu', {'serial_engine': 'pymodbus'}, ModbusTransport),
     ('ap_ascii', {}, ApAsciiTransport),
     ('fc_protocol', {}, FcProtocolTransport),
     pymodbus_case('modbus_tcp', {}, ModbusTransport),
-    pymodbus_case('rtu_over_tcp', {}, ModbusTransport),
+    ('rtu_over_tcp', {}, RtuSerialTransport),
 ])
 def test_the_transport_of_each_protocol_is_built_without_opening_the_link(
         protocol, options, expected):

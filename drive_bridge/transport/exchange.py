@@ -1,0 +1,236 @@
+"""
+The line discipline: one read loop that owns the line's timing, for every serial protocol.
+
+Modbus RTU, AP ASCII and the FC protocol carry no transaction id: a frame of the right
+shape may be a late answer to an earlier request. :class:`LineDiscipline` runs every
+transaction of a line (a serial port, or a TCP stream of RTU or FC frames) with the
+protocol's framer (:mod:`drive_bridge.protocol.framing`) and takes a frame as the answer to
+a request only when it can be nothing else:
+
+- **Before each request** what came since the last transaction is read: anything there came
+  late, and the line is quarantined before the request goes out.
+- **One frame of the unit per reply window** (:mod:`.reply_window`): frames of other units
+  are skipped and counted against the unit they name; a second frame of the unit fails the
+  transaction as ambiguous; a frame of the unit that does not answer the request, or that
+  was complete before the request and it could have crossed the wire (a real UART only),
+  is a late one and fails it.
+- **End of frame**: bytes that continue within the inter-frame silence after a frame make
+  it one corrupt frame.
+- **Quarantine** after a transaction that ended badly (no reply, a corrupt or truncated
+  frame, an extra frame) or that saw a late frame: input is read and discarded until the
+  guard has passed and the line has been silent for the quarantine silence. Every whole
+  frame discarded is counted against the unit it names (:attr:`TransactionReport.late`).
+- **Suspects**: a unit whose last transaction got no frame at all may still owe that reply
+  (a device or gateway that holds it until the next request). Its next transaction keeps its
+  first reply window open to the deadline, so that a held reply and the answer, arriving
+  one after the other, are two frames and fail it instead of the held one being taken.
+  Where frames name no unit (AP ASCII) the whole line is the suspect.
+
+The transports (:mod:`.serial_rtu`, :mod:`.ap_ascii`, :mod:`.fc_protocol`) build the request
+bytes and say whether a frame answers their request; the :class:`ByteLine` moves bytes.
+"""
+
+from dataclasses import dataclass
+import time
+from typing import Any, Callable, List, Optional, Protocol
+
+from drive_bridge.errors import LineBabble, TransportError
+from drive_bridge.protocol.framing import Frame, Framer, frames_in
+from drive_bridge.transport.base import TransactionReport
+from drive_bridge.transport.reply_window import Accept, ReplyWindow, WindowTiming
+
+MAX_READ_BYTES = 512  # one read of whatever is there
+MAX_SCANNED_BYTES = 4096  # discarded bytes looked through for whole frames, at most
+BABBLE_SILENCES = 4  # talking past the guard this many quarantine silences (at least): babble
+NO_UNIT = None  # the suspect key of a protocol whose frames name no unit
+
+
+class ByteLine(Protocol):
+    """What the line discipline needs of a port: bytes in and out, waits bounded."""
+
+    @property
+    def is_open(self) -> bool:
+        """Return whether the line is open."""
+
+    def connect(self) -> None:
+        """Open the line; raise LinkDown with the reason in words."""
+
+    def close(self) -> None:
+        """Close the line (idempotent)."""
+
+    def write(self, data: bytes, deadline: float) -> None:
+        """Write ``data`` whole by ``deadline``."""
+
+    def read(self, count: int, timeout_s: float, at_least: int = 1) -> bytes:
+        """Return up to ``count`` bytes, waiting at most ``timeout_s`` for ``at_least``."""
+
+    def wait_quiet(self, timeout_s: float) -> bytes:
+        """Wait ``timeout_s`` (less if bytes arrive) and return what is there, no more."""
+
+
+@dataclass(frozen=True)
+class LineTiming:
+    """
+    The times of one line, in seconds.
+
+    ``gap_s``: the protocol's inter-frame silence (the end-of-frame check);
+    ``quarantine_silence_s``: the silence that ends a quarantine (at least the gap, longer
+    where USB adapters deliver bytes in batches); ``guard_s``: how long after a failure late
+    replies are still waited for; ``paced``: bytes arrive at the wire's pace (a real UART),
+    so a reply complete too soon to be ours is not ours. ``echo``: the adapter echoes.
+    """
+
+    char_s: float
+    gap_s: float
+    timeout_s: float
+    guard_s: float
+    quarantine_silence_s: float
+    paced: bool = False
+    echo: bool = False
+
+
+class LineDiscipline:
+    """Run the transactions of one line; see the module docstring."""
+
+    def __init__(self, line: ByteLine, framer: Framer, timing: LineTiming,
+                 clock: Callable[[], float] = time.monotonic,
+                 on_request_sent: Callable[[], None] = lambda: None):
+        self.line = line
+        self.framer = framer
+        self.timing = timing
+        self.clock = clock
+        self.on_request_sent = on_request_sent
+        self.suspects: set = set()  # units that may owe a reply (see the module docstring)
+        self.report = TransactionReport()
+        self._unit: Optional[int] = None
+        self._first_window = True
+        self._window_discards = False  # a window of this transaction discarded something
+        self._answer_s = 0.0  # when the last answer of this transaction came
+
+    def key(self, unit: Optional[int]) -> Optional[int]:
+        """Return the suspect key of ``unit`` (the line, where frames name no unit)."""
+        return unit if self.framer.names_units else NO_UNIT
+
+    # -- a transaction ------------------------------------------------------------------
+    def begin(self, unit: int) -> None:
+        """Start a transaction with ``unit``: anything already there came late."""
+        self.report = TransactionReport()
+        self._unit, self._first_window = unit, True
+        self._window_discards = False
+        self._answer_s = 0.0
+        pending = self.line.read(MAX_READ_BYTES, 0.0)
+        if pending:
+            self._discard(pending)
+            self.quarantine(self.clock())
+
+    def exchange(self, request: bytes, accept: Accept) -> Any:
+        """
+        Send ``request`` and return what ``accept`` makes of its answer, or raise.
+
+        ``accept(frame)`` returns the value of a frame of the unit that answers the request,
+        or raises BadFrame saying why it does not (a late frame). The first exchange of a
+        transaction with a suspect unit keeps its window open to the deadline.
+        """
+        sent_s = self.clock()
+        deadline = sent_s + self.timing.timeout_s
+        self.line.write(request, deadline)
+        self.on_request_sent()
+        hold_open = self._first_window and self.key(self._unit) in self.suspects
+        self._first_window = False
+        window = ReplyWindow(self.line, self.framer, self._window_timing(), sent_s, self.clock)
+        try:
+            if self.timing.echo:
+                window.read_echo(request, deadline)
+            return window.read(self._unit, accept, len(request), deadline, hold_open)
+        finally:
+            self._take(window)
+
+    def send_only(self, request: bytes) -> None:
+        """Send ``request`` that nobody answers (a broadcast); the line's gap follows."""
+        self._first_window = False
+        self.line.write(request, self.clock() + self.timing.timeout_s)
+        self.on_request_sent()
+
+    def failed(self, error: TransportError) -> None:
+        """End a transaction that failed on the line: mark a suspect, quarantine."""
+        if _no_frame_came(error):  # the window that failed got nothing of the unit
+            self.suspects.add(self.key(self._unit))
+        self.quarantine(self.clock())
+
+    def done(self) -> None:
+        """End a transaction that got its answer; quarantine if it saw a late frame."""
+        if self._window_discards:
+            self.quarantine(self.clock())
+        if self._answer_s:
+            self.report.after_answer_s = self.clock() - self._answer_s
+
+    # -- quarantine ---------------------------------------------------------------------
+    def quarantine(self, since_s: float) -> None:
+        """
+        Read and discard input until the guard has passed and the line has been silent.
+
+        A line that keeps talking past the guard for longer than the protocol's longest
+        frame takes (and four silences) is babbling: LineBabble (another master or a faulty
+        device), a link fault.
+        """
+        timing = self.timing
+        guard_end = since_s + timing.guard_s
+        silence = timing.quarantine_silence_s
+        limit = guard_end + max(self.framer.max_bytes * timing.char_s,
+                                BABBLE_SILENCES * silence)
+        last_s, discarded = since_s, b''
+        while True:
+            now = self.clock()
+            end = max(guard_end, last_s + silence)
+            if now >= end:
+                break
+            if now > limit:
+                self._discard(discarded)
+                raise LineBabble(f'the line keeps talking ({len(discarded)} bytes past a '
+                                 f'failed transaction, no pause of {silence * 1000:.0f} ms '
+                                 f'within {limit - since_s:.2g} s): another master or a '
+                                 'faulty device is sending')
+            chunk = self.line.read(MAX_READ_BYTES, min(end, limit + silence) - now)
+            if chunk:
+                if len(discarded) < MAX_SCANNED_BYTES:  # a babbler's bytes are only counted
+                    discarded += chunk
+                else:
+                    self.report.noise_bytes += len(chunk)
+                last_s = self.clock()
+        self._discard(discarded)
+        self.report.quiet_s = self.clock() - last_s
+
+    # -- bookkeeping --------------------------------------------------------------------
+    def _window_timing(self) -> WindowTiming:
+        timing = self.timing
+        return WindowTiming(timing.char_s, timing.gap_s, timing.timeout_s, timing.paced)
+
+    def _take(self, window: ReplyWindow) -> None:
+        """Take a window's discarded frames and what it saw of the unit into the report."""
+        if window.unit_seen:
+            self.suspects.discard(self.key(self._unit))
+        self._window_discards = self._window_discards or bool(window.late or window.unread)
+        self._count(window.late)
+        self.report.noise_bytes += len(window.unread)  # part of a corrupt frame
+        self.report.quiet_s = window.quiet_s
+        if self._answer_s:  # the earlier window's answer: the time since is not round trip
+            self.report.held_s += window.sent_s - self._answer_s
+        self._answer_s = window.answer_s
+
+    def _discard(self, data: bytes) -> None:
+        """Count the whole frames in discarded bytes as late, the rest as noise."""
+        if not data:
+            return
+        frames, noise = frames_in(self.framer, data)
+        self._count(frames)
+        self.report.noise_bytes += noise
+
+    def _count(self, frames: List[Frame]) -> None:
+        for frame in frames:
+            self.report.late.append(frame)
+            self.suspects.discard(self.key(frame.unit))
+
+
+def _no_frame_came(error: TransportError) -> bool:
+    """Return whether a window failed because nothing of the unit came (it may still)."""
+    return error.kind in ('timeout', 'wrong_address')
