@@ -5,8 +5,8 @@ One simulated FC 51, started (so the control word and reference go out every cyc
 child process, polled as fast as the bus allows through a wire pacer in this process
 (:mod:`drive_bridge.sim.wire_pacer`), not the simulator's own reply pacing: every byte takes
 its 8E1 wire time, the line is half duplex and every frame must follow its protocol's
-silence (Modbus RTU 3.5 characters, FC protocol 2). Over Modbus RTU with each serial engine
-and over the FC protocol, for the same drive data (control word, reference, status word,
+silence (Modbus RTU 3.5 characters, FC protocol 2). Over Modbus RTU and over the FC
+protocol, for the same drive data (control word, reference, status word,
 main actual value, motor current, the slow readouts every ``readout_period``). Prints, from
 the pacer's frame log: the cycle time, transactions and bytes per cycle, the wire-time
 minimum of the same frames and the fraction of it reached, gap violations and collisions.
@@ -26,13 +26,12 @@ from drive_bridge.protocol import fc_telegram as fcp
 from drive_bridge.sim.wire_pacer import LineTiming, MODBUS_GAP_CHARACTERS, transactions
 from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.link import LinkSettings
-from drive_bridge.transport.modbus import PYMODBUS_VERSION
 from paced_line import PacedSimulator
 
 READOUT_PERIOD_S = 1.0  # the node's default
 
 
-def make_bus(line: PacedSimulator, protocol: str, engine: str, readings: list) -> BusMaster:
+def make_bus(line: PacedSimulator, protocol: str, readings: list) -> BusMaster:
     """Return a bus master for one FC 51 on ``line`` over ``protocol``."""
     baudrate = line.timing.baudrate
     settings = LinkSettings(protocol=protocol, port=line.path, baudrate=baudrate, parity='N',
@@ -40,24 +39,22 @@ def make_bus(line: PacedSimulator, protocol: str, engine: str, readings: list) -
     slow = SlowReadouts(READOUT_PERIOD_S)
     if protocol == 'fc_protocol':
         profile = FcProtocolDriveProfile(fc.DATA, 'fc51', slow_readouts=slow)
-        options = {}
     else:
         profile = DriveProfile(fc.DATA, 'fc51', slow_readouts=slow)
-        options = {'serial_engine': engine}
-    return BusMaster(make_transport(settings, options),
+    return BusMaster(make_transport(settings),
                      [DeviceSpec('conv', 1, profile, poll_rate_hz=100.0)],
                      BusTiming(frame_gap_s=line.timing.gap_s),  # the 8E1 gap, not 8N1's
                      listener=lambda event: readings.append(isinstance(event, ReadingEvent)))
 
 
-def bench(baudrate: int, seconds: float, protocol: str, engine: str = '') -> dict:
+def bench(baudrate: int, seconds: float, protocol: str) -> dict:
     """Poll one started FC 51 as fast as the line allows; return the figures."""
     gap = fcp.GAP_CHARACTERS if protocol == 'fc_protocol' else MODBUS_GAP_CHARACTERS
     timing = LineTiming(baudrate, 'E', 1, gap_characters=gap)
     line = PacedSimulator(['fc51:1'], timing,
                           protocol='fc_protocol' if protocol == 'fc_protocol' else 'modbus')
     readings = []
-    bus = make_bus(line, protocol, engine, readings)
+    bus = make_bus(line, protocol, readings)
     deadline = time.monotonic() + 10.0
     while bus.snapshot('conv').reading is None and time.monotonic() < deadline:
         bus.run_step()  # connect, identify, first reading
@@ -88,15 +85,14 @@ def bench(baudrate: int, seconds: float, protocol: str, engine: str = '') -> dic
 
 def main() -> None:
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 5.0
-    print(f'pymodbus {PYMODBUS_VERSION}; 1 simulated FC 51 running, 8E1 timing through the '
-          f'wire pacer, readout_period {READOUT_PERIOD_S:g} s, {seconds:g} s per case')
-    print('protocol     engine    baud  cycle ms  tx/cycle  bytes/cycle  wire ms/cycle  '
+    print(f'1 simulated FC 51 running, 8E1 timing through the wire pacer, readout_period '
+          f'{READOUT_PERIOD_S:g} s, {seconds:g} s per case')
+    print('protocol      baud  cycle ms  tx/cycle  bytes/cycle  wire ms/cycle  '
           'fraction  cycles/s  gap viol.  collisions')
     for baudrate in (9600, 19200):
-        for protocol, engine in (('modbus_rtu', 'native'), ('modbus_rtu', 'pymodbus'),
-                                 ('fc_protocol', '')):
-            result = bench(baudrate, seconds, protocol, engine)
-            print(f'{protocol:11s}  {engine or "-":8s}  {baudrate:5d}  {result["cycle_ms"]:8.1f}  '
+        for protocol in ('modbus_rtu', 'fc_protocol'):
+            result = bench(baudrate, seconds, protocol)
+            print(f'{protocol:11s}  {baudrate:5d}  {result["cycle_ms"]:8.1f}  '
                   f'{result["tx_per_cycle"]:8.2f}  {result["bytes_per_cycle"]:11.1f}  '
                   f'{result["wire_ms"]:13.1f}  {result["wire_ms"] / result["cycle_ms"]:8.1%}  '
                   f'{1000 / result["cycle_ms"]:8.1f}  {result["violations"]:9d}  '

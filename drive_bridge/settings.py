@@ -26,6 +26,7 @@ class Setting:
 
     ``low``/``high`` bound numbers (``high_open``: high itself excluded); ``choices`` bound
     strings and ints; ``runtime`` settings may be changed with ``ros2 param set``.
+    ``retired``: (value, what to do instead) for values an earlier release took.
     """
 
     name: str
@@ -37,6 +38,7 @@ class Setting:
     choices: Tuple = ()
     runtime: bool = False
     high_open: bool = False
+    retired: Tuple[Tuple[Any, str], ...] = ()
 
     def allowed(self) -> str:
         """Return the allowed values in words."""
@@ -55,8 +57,9 @@ def check_value(setting: Setting, value: Any, label: str) -> Any:
         raise ConfigError(f'parameter {label!r} is required: allowed {setting.allowed()}')
     value = _coerce(setting, value, label)
     if setting.choices and value not in setting.choices:
+        why = dict(setting.retired).get(value)
         raise ConfigError(f'parameter {label!r} = {shown(value)} is invalid: allowed '
-                          f'{setting.allowed()}')
+                          f'{setting.allowed()}' + (f' ({why})' if why else ''))
     if setting.low is not None and not _in_range(setting, value):
         raise ConfigError(f'parameter {label!r} = {shown(value)} is out of range: allowed '
                           f'{setting.allowed()}')

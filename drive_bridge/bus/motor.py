@@ -177,7 +177,11 @@ class MotorOwner(ControlView):
 
         A start is never repeated: a cyclic device gets the stop image from now on, so the
         drive cannot keep running on a start that was answered as failed. A stop leaves the
-        motor as "may be running" if it might have been before.
+        motor as "may be running" if it might have been before. ``now_s`` is when the
+        failure was reported: the transports raise only after quarantining the line
+        (:mod:`drive_bridge.transport.exchange`), so only a reading of a poll begun
+        :data:`SETTLE_S` after it (on a clean line) can settle "may be running"; a late
+        reply of an earlier read is never one.
         """
         self.in_flight = None
         self.unsure_since_s = now_s

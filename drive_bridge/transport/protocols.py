@@ -18,6 +18,9 @@ from drive_bridge.protocol.requests import AP_ASCII_REQUESTS, MODBUS_REQUESTS
 from drive_bridge.settings import Setting
 
 SERIAL_ENGINES = ('native',)
+PYMODBUS_RETIRED = ("pymodbus's serial client was removed in 0.5: it takes the first frame it "
+                    'reads, a late reply too; remove serial_engine: the native engine keeps '
+                    'the line discipline, see docs/reliability.md, "Late replies"')
 # The quarantine's guard by protocol (late_reply_guard 0): how long after a failed transaction
 # a late reply is still expected. The Modbus serial-line spec names no response time (its
 # broadcast turnaround delay is 100-200 ms); the FC protocol's slowest documented reply
@@ -65,10 +68,8 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
         'modbus_rtu', 'Modbus RTU on a serial port', 'serial', MODBUS_REQUESTS,
         reply_guard_s=MODBUS_RTU_GUARD_S,
         settings=(Setting('serial_engine', str, 'native',
-                          "Modbus RTU on a serial port: native, the only engine (pymodbus's "
-                          'serial client was removed in 0.5: it takes the first frame it '
-                          'reads, docs/reliability.md "Late replies")',
-                          choices=SERIAL_ENGINES),)),
+                          'Modbus RTU on a serial port: native, the only engine since 0.5',
+                          choices=SERIAL_ENGINES, retired=(('pymodbus', PYMODBUS_RETIRED),)),)),
     ProtocolSpec(
         'ap_ascii', 'MCD AP ASCII on a serial port (8N1)', 'serial', AP_ASCII_REQUESTS,
         fixed_framing=('N', 1), default_stopbits=lambda parity: 1,

@@ -167,10 +167,7 @@ def test_a_missing_port_is_link_down_with_its_name():
 
 # -- fake ports: a babbling line, random bytes ------------------------------------------
 class FakePort:
-    """
-    A port whose reads return ``incoming`` once a telegram was written (then silence), or
-    babble for ``babble_s``.
-    """
+    """A port that answers ``incoming`` once written to (then silence), or babbles."""
 
     def __init__(self, incoming: bytes = b'', babble_s: float = 0.0):
         self.incoming = bytearray(incoming)

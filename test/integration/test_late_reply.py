@@ -33,7 +33,7 @@ def scripted(script, decode=rtu_requests, tcp=False, **settings):
     line = ScriptedDeviceLine(decode, lambda index, request: script(holder['line'], index,
                                                                     request), tcp=tcp)
     holder['line'] = line
-    values = dict(timeout_s=TIMEOUT_S, parity='N')
+    values = {'timeout_s': TIMEOUT_S, 'parity': 'N'}
     values.update(settings)
     if tcp:
         values.update(protocol='rtu_over_tcp', tcp_port=line.tcp_port)
@@ -80,8 +80,10 @@ def test_a_steady_lag_never_returns_another_reads_values_and_each_late_reply_is_
 
 def hold_first(replies_after_s):
     """
-    Hold the replies to all requests but the last; send them when the last one comes, then
-    its own answer ``replies_after_s[-1]`` later (a device or gateway that holds replies).
+    Return a script that holds the replies to all requests but the last.
+
+    They go out when the last request comes, then its own answer ``replies_after_s[-1]``
+    later: a device or gateway that holds replies.
     """
     held = []
 
@@ -177,7 +179,7 @@ def test_rtu_over_tcp_another_units_late_frame_does_not_lose_ours():
 
 # -- AP ASCII: replies name no unit ---------------------------------------------------------
 def ascii_script(late_b10_s):
-    """A starter that ACKs everything; B10's ACK is held (None) or sent ``late_b10_s`` late."""
+    """Return a starter that ACKs all: B10's ACK held (None) or ``late_b10_s`` late."""
     def script(line, index, fragment):
         if fragment.kind == 'message' and fragment.code == 'B10':
             if late_b10_s is None:

@@ -9,24 +9,22 @@ device side only: the frame's bytes read with the manuals' register maps, and fo
 the output image it holds before and after the write. Nothing of the bridge is read.
 
 The line is served on a pty (the bridge's own serial transport, real time, the simulator on
-its thread) or through :class:`VirtualLine`: a transport that hands each request to the
-simulator in the caller's thread and moves a :class:`VirtualClock` by the wire time, a
-timeout for a lost reply. A virtual run does not depend on the machine's load: the same seed
-gives the same run.
+its thread) or through :class:`VirtualLine`: the same transport and line discipline on a
+byte line that hands each request to the simulator in the caller's thread and moves a
+:class:`VirtualClock` by the wire time, a timeout for a lost reply. A virtual run does not
+depend on the machine's load: the same seed gives the same run.
 """
 
 from dataclasses import dataclass, replace
 from typing import Callable, Dict, List, Optional, Tuple
 
-from drive_bridge.errors import (
-    BadFrame, CrcError, DeviceException, NoResponse, TruncatedFrame, WrongAddress)
 from drive_bridge.protocol import fc_control as ctw, rtu
 from drive_bridge.protocol.lvsg import Control
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.sim.faults import mangle_rtu_reply, MODBUS_FAULTS
 from drive_bridge.sim.modbus_server import ModbusSimServer
-from drive_bridge.transport.base import Transport
 from drive_bridge.transport.link import LinkSettings
+from drive_bridge.transport.serial_rtu import RtuSerialTransport
 
 WRITE_FUNCTIONS = (rtu.WRITE_SINGLE_COIL, rtu.WRITE_SINGLE_REGISTER, rtu.WRITE_MULTIPLE_COILS,
                    rtu.WRITE_MULTIPLE_REGISTERS)
@@ -267,21 +265,21 @@ class RecordingServer(ModbusSimServer):
                                          control, silenced))
         return reply
 
-    def exchange(self, frame: RtuFrame, raw: bytes) -> Tuple[Optional[bytes], bool]:
+    def exchange(self, frame: RtuFrame, raw: bytes) -> Tuple[Optional[bytes], Optional[str]]:
         """
         Carry one request as the serving thread would (virtual line); return the reply.
 
         Returns (the reply's bytes as sent, possibly spoiled by a fault, or None for
-        silence; whether the reply is a 'slow' one).
+        silence; the fault injected, whose timing the virtual line keeps).
         """
         fault = self._draw_fault(frame, MODBUS_FAULTS)
         reply = self._answer(frame, raw, fault)
         if reply is None:
-            return None, False
+            return None, fault
         data = reply.encode()
         if fault is not None:
             data = mangle_rtu_reply(fault, data, self.faults)
-        return data or None, fault == 'slow'
+        return data or None, fault
 
 
 class VirtualClock:
@@ -299,70 +297,97 @@ class VirtualClock:
         self.now += max(0.0, seconds)
 
 
-class VirtualLine(Transport):
+class VirtualByteLine:
     """
-    A transport onto a :class:`RecordingServer` in this thread, on a virtual clock.
+    A byte line onto a :class:`RecordingServer` in the caller's thread, on a virtual clock.
 
-    It reads a reply as the serial transport does (the length from the first bytes, then
-    exactly the bytes still missing), so every fault is told apart the same way: silence is
-    a timeout, a short reply is truncated after the timeout, a bad CRC, a wrong address and
-    garbage are bad frames, a 'slow' reply arrives late but valid.
+    Each request written is framed and handed to the simulator at once; its reply arrives
+    byte by byte at the wire's pace after the request's wire time and a turnaround, a 'slow'
+    one ``slow_s`` later, a 'late' one after the master's timeout, a 'late_batched' one with
+    the next request's. Reads move the clock to the byte they wait for, or to their timeout.
+    """
+
+    def __init__(self, server: RecordingServer, clock: VirtualClock, char_s: float):
+        self.server = server
+        self.clock = clock
+        self.char_s = char_s
+        self.arrivals: List[Tuple[float, int]] = []  # (time, byte) not yet read
+        self.held = b''  # late_batched replies, sent with the next request's
+        self.is_open = False
+
+    def connect(self) -> None:
+        """Open the (virtual) line."""
+        self.is_open = True
+
+    def close(self) -> None:
+        """Close the line."""
+        self.is_open = False
+
+    def write(self, data: bytes, deadline: float) -> None:
+        """Hand the request to the simulator; schedule what it sends back."""
+        request_s = len(data) * self.char_s
+        if self.held:
+            self._arrive(request_s, self.held)
+            self.held = b''
+        frame = rtu.decode_request(data).frame
+        if frame is None:
+            return
+        reply, fault = self.server.exchange(frame, data)
+        if reply is None:
+            return
+        if fault == 'late_batched':
+            self.held += reply
+            return
+        self._arrive(request_s + TURNAROUND_S + self._delay_s(fault), reply)
+
+    def _delay_s(self, fault: Optional[str]) -> float:
+        plan = self.server.faults.plan
+        if fault == 'slow':
+            return plan.slow_s
+        if fault == 'late':
+            return plan.master_timeout_s + plan.late_s
+        return 0.0
+
+    def _arrive(self, delay_s: float, data: bytes) -> None:
+        start = self.clock() + delay_s
+        self.arrivals.extend((start + (i + 1) * self.char_s, byte) for i, byte in enumerate(data))
+        self.arrivals.sort(key=lambda arrival: arrival[0])
+
+    def _take(self, count: int) -> bytes:
+        now = self.clock()
+        taken = [byte for moment, byte in self.arrivals[:count] if moment <= now]
+        del self.arrivals[:len(taken)]
+        return bytes(taken)
+
+    def read(self, count: int, timeout_s: float, at_least: int = 1) -> bytes:
+        """Return up to ``count`` bytes, moving the clock to ``at_least`` or the timeout."""
+        wanted = min(at_least, count)
+        there = sum(1 for moment, _ in self.arrivals if moment <= self.clock())
+        if there < wanted and timeout_s > 0:
+            end = self.clock() + timeout_s
+            due = self.arrivals[wanted - 1][0] if len(self.arrivals) >= wanted else end
+            self.clock.sleep(min(due, end) - self.clock())
+        return self._take(count)
+
+    def wait_quiet(self, timeout_s: float) -> bytes:
+        """Let ``timeout_s`` pass; return what arrived."""
+        self.clock.sleep(timeout_s)
+        return self._take(len(self.arrivals))
+
+
+class VirtualLine(RtuSerialTransport):
+    """
+    The bridge's own RTU transport, line discipline included, on a :class:`VirtualByteLine`.
+
+    Every fault is told apart as on a serial port: silence is a timeout, a short reply is
+    truncated after the timeout, a bad CRC, a wrong address and garbage are bad frames, a
+    'slow' reply arrives late but valid, a late one is discarded in the quarantine.
     """
 
     def __init__(self, settings: LinkSettings, server: RecordingServer, clock: VirtualClock):
-        super().__init__(settings)
+        timing_line = LinkSettings(**{**settings.__dict__, 'port': '/dev/virtual'})
+        char_s = rtu.character_time_s(settings.baudrate, settings.effective_parity,
+                                      settings.effective_stopbits)
+        super().__init__(timing_line, paced=False, clock=clock,
+                         line=VirtualByteLine(server, clock, char_s))
         self.server = server
-        self.clock = clock
-        self.char_s = rtu.character_time_s(settings.baudrate, settings.effective_parity,
-                                           settings.effective_stopbits)
-        self._connected = False
-
-    @property
-    def connected(self) -> bool:
-        """Return whether the link is open."""
-        return self._connected
-
-    def connect(self) -> None:
-        """Open the (virtual) link."""
-        self._connected = True
-
-    def close(self) -> None:
-        """Close the link."""
-        self._connected = False
-
-    def execute(self, unit: int, request):
-        """Run one request with device ``unit``; return registers or coils read, or None."""
-        frame = request.frame(unit)
-        raw = frame.encode()
-        deadline = self.clock() + self.settings.timeout_s
-        self.clock.sleep(len(raw) * self.char_s)
-        data, slow = self.server.exchange(frame, raw)
-        if data is None:
-            self.clock.sleep(deadline - self.clock())
-            raise NoResponse(f'no reply within {self.settings.timeout_s:g} s')
-        self.clock.sleep(TURNAROUND_S + (self.server.faults.plan.slow_s if slow else 0.0))
-        reply = self._receive(data, unit, frame.function, deadline)
-        if reply.function & 0x80:
-            raise DeviceException(reply.data[0])
-        return request.parse(frame, reply)
-
-    def _receive(self, data: bytes, unit: int, function: int, deadline: float) -> RtuFrame:
-        buffer = b''
-        needed = rtu.MIN_RESPONSE_BYTES
-        while True:
-            taken = data[len(buffer):needed]
-            self.clock.sleep(len(taken) * self.char_s)
-            buffer += taken
-            result = rtu.decode_response(buffer, unit, function)
-            if result.frame is not None:
-                return result.frame
-            if result.error:
-                error_type = {'crc': CrcError, 'wrong_address': WrongAddress}.get(
-                    result.error_kind, BadFrame)
-                raise error_type(f'invalid reply ({result.error}), {len(buffer)} bytes '
-                                 'received')
-            if len(buffer) < needed:
-                self.clock.sleep(deadline - self.clock())
-                raise TruncatedFrame(f'truncated reply: {len(buffer)} of {needed} bytes '
-                                     f'within {self.settings.timeout_s:g} s')
-            needed = result.needed

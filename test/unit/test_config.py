@@ -58,12 +58,22 @@ def test_int_is_accepted_for_a_double():
      "device 'starter' (family fc) cannot run on protocol 'ap_ascii'"),
     ({'protocol': 'canopen'}, {}, "parameter 'protocol' = 'canopen' is invalid"),
     ({'timeout': 0.0}, {}, "parameter 'timeout' = 0.0 is out of range"),
+    ({'serial_engine': 'pymodbus'}, {}, "'serial_engine' = 'pymodbus' is invalid: allowed "
+     "native (pymodbus's serial client was removed in 0.5"),
+    ({'late_reply_guard': -0.1}, {}, "'late_reply_guard' = -0.1 is out of range: allowed [0, 10]"),
 ])
 def test_bad_values_give_one_clear_line(bus, device, message):
     with pytest.raises(ConfigError) as error:
         build(bus, {'starter': {**GOOD_DEVICE, **device}})
     assert message in str(error.value)
     assert '\n' not in str(error.value)
+
+
+def test_the_late_reply_guard_is_the_protocol_s_own_unless_set():
+    assert build().link.guard_s == 0.1  # Modbus RTU
+    assert build({'late_reply_guard': 0.4}).link.guard_s == 0.4
+    ascii_bus = {'protocol': 'ap_ascii', 'parity': 'N'}
+    assert build(ascii_bus).link.guard_s == 0.25  # the MCD 3000's response time
 
 
 def test_device_list_errors():
