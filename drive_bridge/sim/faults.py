@@ -14,22 +14,22 @@ after the master gave up can be taken for the answer to its next request. ``late
 
 Modbus RTU kinds and what the master sees:
 
-==============  =========================================================  ==============
-kind            what the simulator does                                    master counts
-==============  =========================================================  ==============
-crc             sends the reply with its CRC inverted                      crc
-no_reply        executes the request, sends nothing                        timeout
-slow            sends the reply ``slow_s`` late (still inside the timeout)  slow reply
-exception       does not execute; answers exception 06 (device busy)       exception
-garbage         the right address, then bytes that are no reply            bad_frame
-truncated       sends the first part of the reply only                     truncated
-wrong_address   sends the reply under another address (valid CRC)          wrong_address
-late            executes; sends the reply ``master_timeout_s + late_s``    timeout
+==============  ============================================================  ==============
+kind            what the simulator does                                       master counts
+==============  ============================================================  ==============
+crc             sends the reply with its CRC inverted                         crc
+no_reply        executes the request, sends nothing                           timeout
+slow            sends the reply ``slow_s`` late (still inside the timeout)    slow reply
+exception       does not execute; answers exception 06 (device busy)          exception
+garbage         the right address, then bytes that are no reply               bad_frame
+truncated       sends the first part of the reply only                        truncated
+wrong_address   sends the reply under another address (valid CRC)             wrong_address
+late            executes; sends the reply ``master_timeout_s + late_s``       timeout
                 after the request arrived, from a timer
-late_batched    executes; holds the reply until the next request (to any   timeout
+late_batched    executes; holds the reply until the next request (to any      timeout
                 unit) on the same connection, then sends it just before
                 that request's own reply
-==============  =========================================================  ==============
+==============  ============================================================  ==============
 
 A late or held reply is whole and valid; on Modbus TCP it keeps its own transaction id.
 A plan that names no kinds draws these two as well; :func:`without_late` gives a tuple of

@@ -18,20 +18,20 @@ thread keeps answering other telegrams meanwhile.
 Faults (seeded, counted per address and kind in ``faults.injected``, as the Modbus
 simulator's; the master's view in the last column):
 
-==============  =========================================================  ==============
-kind            what the simulator does                                    master counts
-==============  =========================================================  ==============
-bcc             sends the reply with its BCC inverted                      crc
-no_reply        executes the telegram, sends nothing                       timeout
-slow            sends the reply ``slow_s`` late (still inside the timeout)  slow reply
-garbage         STX, then an impossible LGE and noise                      bad_frame
-truncated       sends the first part of the reply only                     truncated
-wrong_address   sends the reply under the next address (valid BCC)         wrong_address
-late            executes; sends the reply ``master_timeout_s + late_s``    timeout
+==============  ============================================================  ==============
+kind            what the simulator does                                       master counts
+==============  ============================================================  ==============
+bcc             sends the reply with its BCC inverted                         crc
+no_reply        executes the telegram, sends nothing                          timeout
+slow            sends the reply ``slow_s`` late (still inside the timeout)    slow reply
+garbage         STX, then an impossible LGE and noise                         bad_frame
+truncated       sends the first part of the reply only                        truncated
+wrong_address   sends the reply under the next address (valid BCC)            wrong_address
+late            executes; sends the reply ``master_timeout_s + late_s``       timeout
                 after the telegram arrived, from a timer
-late_batched    executes; holds the reply until the next telegram on the   timeout
+late_batched    executes; holds the reply until the next telegram on the      timeout
                 same connection, then sends it just before that one's reply
-==============  =========================================================  ==============
+==============  ============================================================  ==============
 """
 
 from dataclasses import replace
