@@ -14,9 +14,15 @@ With ``--console`` (default when standard input is a terminal) it reads commands
 ``trip ADDR CODE`` (MCD trip code; FC: alarm word bit, 5 = over current), ``hand ADDR
 on|off`` (MCD Hand On; FC local operation), ``silent ADDR on|off``, ``fault ADDR KIND
 [COUNT]`` (the next replies; Modbus: crc, no_reply, slow, exception, garbage, truncated,
-wrong_address; AP ASCII: nak, bel, silence, garbage, slow), ``status``, ``quit``.
+wrong_address, late, late_batched; FC protocol: bcc for crc, no exception; AP ASCII: nak,
+bel, silence, garbage, slow, late, late_batched, each as ``KIND`` or ``KIND:address`` for the
+address fragment's ACK and ``KIND:message`` for the reply to the message fragment),
+``status``, ``quit``.
 ``--faults RATE[:KIND,...]`` with ``--fault-seed N`` injects random faults into that share of
-all replies, reproducibly. ``--pace BAUD[:PARITY[:STOPBITS]]`` puts a wire pacer
+all replies, reproducibly. A ``late`` reply comes ``--master-timeout`` (the bridge's
+``timeout``, 0.5 s) plus ``--fault-late`` (0.02 s) after its request, a ``late_batched`` one
+just before the reply to the next request on its connection; the device executes the request
+either way. ``--pace BAUD[:PARITY[:STOPBITS]]`` puts a wire pacer
 (:mod:`drive_bridge.sim.wire_pacer`) in front of the pty: every byte takes its wire time at
 that timing, the line is half duplex and, for Modbus, every frame must follow 3.5 characters
 of silence; the pty path printed (and ``--link``) is then the pacer's.
@@ -33,7 +39,7 @@ from drive_bridge.console import OneLineParser
 from drive_bridge.devices import mcd
 from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
 from drive_bridge.sim.devices import make_device, SIM_MODELS
-from drive_bridge.sim.faults import parse_fault_plan
+from drive_bridge.sim.faults import FaultPlan, parse_fault_plan
 from drive_bridge.sim.fc_device import FcSimDevice
 from drive_bridge.sim.fc_protocol_device import FcProtocolDevice
 from drive_bridge.sim.fc_protocol_server import FcProtocolSimServer
@@ -66,6 +72,17 @@ def parse_lvsg(text: str) -> tuple:
             f'{text!r}: give MODEL:IN:OUT[:basic], MODEL mcd201 or mcd202, IN and OUT register '
             'numbers (frame addresses)')
     return int(parts[1]), (parts[0], int(parts[2]), 'basic' if parts[3:] else 'extended')
+
+
+def non_negative_seconds(text: str) -> float:
+    """Parse a time in seconds that must not be negative (an option's type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number of seconds') from None
+    if not value >= 0 or value == float('inf'):  # NaN and inf too
+        raise argparse.ArgumentTypeError(f'{text!r}: give seconds, 0 or more')
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -110,8 +127,15 @@ def build_parser() -> argparse.ArgumentParser:
                         help='inject random faults into this share of replies, e.g. 0.1 or '
                              '0.05:crc,no_reply (kinds: see drive_bridge.sim.faults)')
     parser.add_argument('--fault-seed', type=int, default=1, help='seed of --faults')
-    parser.add_argument('--fault-slow', type=float, default=0.1,
+    parser.add_argument('--fault-slow', type=non_negative_seconds, default=0.1,
                         help="delay of a 'slow' reply, seconds (keep it under the timeout)")
+    parser.add_argument('--fault-late', type=non_negative_seconds, default=0.02,
+                        metavar='SECONDS',
+                        help="a 'late' reply comes this long after the master's timeout")
+    parser.add_argument('--master-timeout', type=non_negative_seconds, default=0.5,
+                        metavar='SECONDS',
+                        help="the master's timeout (the bridge's 'timeout'), for 'late' "
+                             'replies')
     return parser
 
 
@@ -179,13 +203,18 @@ def build_server(args: argparse.Namespace):
 
 
 def _with_faults(server, args: argparse.Namespace):
-    """Give the server the random fault plan of ``--faults``, if any; return it."""
-    if args.faults:
-        try:
-            server.faults.set_plan(parse_fault_plan(args.faults, server.faults.allowed,
-                                                    args.fault_seed, args.fault_slow))
-        except ValueError as error:
-            raise SystemExit(f'drive_bridge_sim: --faults: {error}') from None
+    """Give the server the fault plan of ``--faults`` (none: only its timing); return it."""
+    timing = {'slow_s': args.fault_slow, 'late_s': args.fault_late,
+              'master_timeout_s': args.master_timeout}
+    if not args.faults:  # the console's faults take the timing too
+        server.faults.set_plan(FaultPlan(0.0, server.faults.allowed, args.fault_seed,
+                                         **timing))
+        return server
+    try:
+        server.faults.set_plan(parse_fault_plan(args.faults, server.faults.allowed,
+                                                args.fault_seed, **timing))
+    except ValueError as error:
+        raise SystemExit(f'drive_bridge_sim: --faults: {error}') from None
     return server
 
 
@@ -214,7 +243,7 @@ def run_console_command(server: ModbusSimServer, line: str) -> str:
         return _console(server, words)
     except (ValueError, IndexError, KeyError) as error:
         return f'error: {error}; commands: trip ADDR CODE, hand ADDR on|off, ' \
-               'silent ADDR on|off, fault ADDR KIND [COUNT], status, quit'
+               'silent ADDR on|off, fault ADDR KIND[:address|:message] [COUNT], status, quit'
 
 
 def _console(server: ModbusSimServer, words: List[str]) -> str:
@@ -235,10 +264,21 @@ def _console(server: ModbusSimServer, words: List[str]) -> str:
         elif command == 'silent':
             (server.silent_units.add if words[2] == 'on' else server.silent_units.discard)(unit)
         elif command == 'fault':
-            server.faults.inject(unit, words[2], int(words[3]) if len(words) > 3 else 1)
+            _inject(server, unit, words[2], int(words[3]) if len(words) > 3 else 1)
         else:
             raise ValueError(f'unknown command {command!r}')
         return _describe(unit, device, now)
+
+
+def _inject(server, unit: int, text: str, count: int) -> None:
+    """Inject ``KIND`` or, on AP ASCII, ``KIND:address`` / ``KIND:message`` into ``unit``."""
+    kind, colon, fragment = text.partition(':')
+    if not colon:
+        server.faults.inject(unit, kind, count)
+    elif isinstance(server, ApAsciiSimServer):
+        server.inject(unit, kind, count, fragment)
+    else:
+        raise ValueError(f'{text!r}: a fragment (:address, :message) is for AP ASCII only')
 
 
 def _model(device):

@@ -11,21 +11,27 @@ without a reply). TCP carries the same raw bytes (a transparent serial server).
 It reuses :class:`~drive_bridge.sim.modbus_server.ModbusSimServer` for the endpoints, the
 thread, unplug/replug and power cycling, and replaces the framing. A partial telegram
 followed by 50 ms of silence is dropped. With ``wire_baud`` set, each reply is held back
-until the request, a 2-character pause and the reply would have crossed a real line.
+until the request, a 2-character pause and the reply would have crossed a real line; that
+wait, like a ``slow`` or ``late`` fault's, is a scheduled write of the line: the serving
+thread keeps answering other telegrams meanwhile.
 
 Faults (seeded, counted per address and kind in ``faults.injected``, as the Modbus
 simulator's; the master's view in the last column):
 
-==============  =========================================================  ==============
-kind            what the simulator does                                    master counts
-==============  =========================================================  ==============
-bcc             sends the reply with its BCC inverted                      crc
-no_reply        executes the telegram, sends nothing                       timeout
-slow            sends the reply ``slow_s`` late (still inside the timeout)  slow reply
-garbage         STX, then an impossible LGE and noise                      bad_frame
-truncated       sends the first part of the reply only                     truncated
-wrong_address   sends the reply under the next address (valid BCC)         wrong_address
-==============  =========================================================  ==============
+==============  ============================================================  ==============
+kind            what the simulator does                                       master counts
+==============  ============================================================  ==============
+bcc             sends the reply with its BCC inverted                         crc
+no_reply        executes the telegram, sends nothing                          timeout
+slow            sends the reply ``slow_s`` late (still inside the timeout)    slow reply
+garbage         STX, then an impossible LGE and noise                         bad_frame
+truncated       sends the first part of the reply only                        truncated
+wrong_address   sends the reply under the next address (valid BCC)            wrong_address
+late            executes; sends the reply ``master_timeout_s + late_s``       timeout
+                after the telegram arrived, from a timer
+late_batched    executes; holds the reply until the next telegram on the      timeout
+                same connection, then sends it just before that one's reply
+==============  ============================================================  ==============
 """
 
 from dataclasses import replace
@@ -34,13 +40,14 @@ from typing import Callable, Dict, Optional, Tuple
 
 from drive_bridge.protocol import fc_telegram as fc
 from drive_bridge.protocol.fc_telegram import FcTelegram
-from drive_bridge.sim.faults import FaultInjector
+from drive_bridge.sim.faults import FaultInjector, LATE_FAULTS
 from drive_bridge.sim.fc_model import FcModel, FcSimConfig
 from drive_bridge.sim.fc_protocol_device import FcProtocolDevice
 from drive_bridge.sim.line_server import Connection
 from drive_bridge.sim.modbus_server import ModbusSimServer
 
-FC_PROTOCOL_FAULTS = ('bcc', 'no_reply', 'slow', 'garbage', 'truncated', 'wrong_address')
+FC_PROTOCOL_FAULTS = ('bcc', 'no_reply', 'slow', 'garbage', 'truncated', 'wrong_address',
+                      *LATE_FAULTS)
 FC_PROTOCOL_MODELS = ('fc51', 'vlt5000', 'vlt6000')
 _IMPOSSIBLE_LGES = (0, 1, 2, 3, 4, 5, 7, 8, 9)
 
@@ -60,7 +67,7 @@ def mangle_fc_reply(kind: str, reply: bytes, injector: FaultInjector) -> Optiona
         lge = _IMPOSSIBLE_LGES[injector.random_int(0, len(_IMPOSSIBLE_LGES) - 1)]
         noise = injector.random_bytes(injector.random_int(4, 12))
         return bytes([fc.STX, lge]) + noise
-    return reply  # 'slow': delayed by the server
+    return reply  # 'slow' and the late ones: timed by the server
 
 
 def next_address_byte(adr: int) -> int:
@@ -106,6 +113,7 @@ class FcProtocolSimServer(ModbusSimServer):
                     if result.error == fc.ERROR_BCC:
                         self.stats.crc_errors += 1
                 continue
+            self.line.release_held(connection)  # a telegram came: late_batched replies go
             self._serve_telegram(connection, result.telegram, raw)
 
     def _serve_telegram(self, connection: Connection, telegram: FcTelegram, raw: bytes) -> None:
@@ -123,7 +131,7 @@ class FcProtocolSimServer(ModbusSimServer):
         if fault is not None and data:
             data = mangle_fc_reply(fault, data, self.faults)
         if data:
-            self._send_telegram(connection, raw, data, fault == 'slow')
+            self._send_telegram(connection, raw, data, fault)
 
     def _addressee(self, telegram: FcTelegram,
                    raw: bytes) -> Tuple[Optional[FcProtocolDevice], int]:
@@ -148,16 +156,14 @@ class FcProtocolSimServer(ModbusSimServer):
             return device, target.address
 
     def _send_telegram(self, connection: Connection, request: bytes, reply: bytes,
-                       slow: bool) -> None:
-        delay = self.faults.plan.slow_s if slow else 0.0
+                       fault: Optional[str]) -> None:
+        """Write ``reply`` when it is due: at once, at wire time, or as ``fault`` says."""
+        due = self.clock()
         if self.wire_baud:
             characters = len(request) + fc.GAP_CHARACTERS + len(reply)
             due = connection.first_byte_s + characters * fc.character_time_s(
                 self.wire_baud, self.wire_parity)
-            delay += due - self.clock()
-        if delay > 0:
-            time.sleep(delay)
-        connection.write(reply)
+        self._send(connection, reply, fault, due)
 
 
 def make_fc_protocol_server(models: Dict[int, str], settings: Optional[dict] = None,

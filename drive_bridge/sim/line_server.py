@@ -6,7 +6,10 @@ A pty (RTU on a serial port) and TCP clients (Modbus TCP, RTU over TCP, raw FC p
 a :class:`Connection`, and hands a connection to its :class:`StreamHandler` whenever bytes
 arrive or a partial frame has gone quiet. Framing and answering are the handler's (the
 Modbus and FC protocol servers); the line's own faults (an unplugged adapter, a gateway
-restart) are here. Standard library only.
+restart) are here. A reply is written with :meth:`LineServer.send` at the time it is due
+(at once, after a ``slow`` fault's delay, at wire time, after the master's timeout), or
+held until the connection's next request (:meth:`LineServer.hold`): the serving thread
+never sleeps for a reply (:mod:`drive_bridge.sim.scheduled_writes`). Standard library only.
 """
 
 import os
@@ -17,8 +20,10 @@ import time
 from typing import Callable, List, Optional, Protocol, Union
 
 from drive_bridge.sim.pty_link import PtyLink
+from drive_bridge.sim.scheduled_writes import ScheduledWrites
 
 STALE_PARTIAL_FRAME_S = 0.05  # a partial frame older than this is dropped (pty has no gaps)
+SELECT_TIMEOUT_S = 0.005  # the longest wait of the serving loop for bytes or a due reply
 FRAMINGS = ('mbap', 'rtu')  # Modbus TCP's MBAP header, or the bytes as on a serial line
 
 
@@ -31,6 +36,7 @@ class Connection:
         self.buffer = b''
         self.first_byte_s = 0.0  # when the buffer's first byte arrived
         self.last_byte_s = 0.0
+        self.closed = False  # set when the line stops watching it: nothing more is written
 
     def fileno(self) -> int:
         """Return the stream's file descriptor."""
@@ -82,6 +88,20 @@ class LineServer:
         self._running = False
         self._loop_actions: List[tuple] = []
         self._unplugged_links: List[str] = []
+        self.writes = ScheduledWrites(clock)
+
+    # -- replies (on the serving thread) ------------------------------------------------
+    def send(self, connection: Connection, data: bytes, due_s: float = 0.0) -> None:
+        """Write ``data`` to ``connection`` at ``due_s`` (0 or past: now), without waiting."""
+        self.writes.write_at(due_s, connection, data)
+
+    def hold(self, connection: Connection, data: bytes) -> None:
+        """Hold ``data`` until the next request on ``connection`` (:meth:`release_held`)."""
+        self.writes.hold(connection, data)
+
+    def release_held(self, connection: Connection) -> None:
+        """Write the replies held for ``connection`` now: its next request has come."""
+        self.writes.release_held(connection)
 
     # -- endpoints ----------------------------------------------------------------------
     def open_pty(self, link_path: str = '') -> str:
@@ -150,11 +170,14 @@ class LineServer:
                 self._close_key(key)
 
     def _forget(self, fileobj) -> bool:
-        """Stop watching ``fileobj``; return False if it was not watched."""
+        """Stop watching ``fileobj``, its replies not yet written dropped; False if unwatched."""
         try:
-            self._selector.unregister(fileobj)
+            key = self._selector.unregister(fileobj)
         except (KeyError, ValueError):
             return False
+        if isinstance(key.data, Connection):
+            key.data.closed = True
+            self.writes.forget(key.data)
         return True
 
     # -- thread -------------------------------------------------------------------------
@@ -174,6 +197,7 @@ class LineServer:
             self._close_key(key)
         for pty in self._ptys:
             pty.close()
+        self.writes.clear()
         os.close(self._wake_w)
 
     def _close_key(self, key) -> None:
@@ -190,11 +214,13 @@ class LineServer:
                 action, done = self._loop_actions.pop(0)
                 action()
                 done.set()
-            events = self._selector.select(timeout=0.005)
+            timeout_s = self.writes.timeout_s(self.clock(), SELECT_TIMEOUT_S)
+            events = self._selector.select(timeout=timeout_s)
             now = self.clock()
             for key, _ in events:
                 self._on_readable(key, now)
             self._flush_stale(now)
+            self.writes.flush_due(self.clock())
 
     def _on_readable(self, key, now: float) -> None:
         if key.data is None:

@@ -7,7 +7,10 @@ exception codes and timing are exact, and faults can be injected. Standard libra
 
 With ``wire_baud`` set, each reply is held back until the request and the reply would
 have crossed a real wire at that baud rate, 3.5-character gap included, so a pty (which
-moves bytes instantly) behaves like a paced line for benchmarks.
+moves bytes instantly) behaves like a paced line for benchmarks. That, a ``slow`` fault's
+delay and a ``late`` fault's reply after the master's timeout are scheduled writes of the
+line (:meth:`LineServer.send`); a ``late_batched`` reply is held until the connection's next
+request (:meth:`LineServer.hold`). The serving thread never sleeps for a reply.
 
 The endpoints and the serving thread are a :class:`~drive_bridge.sim.line_server.LineServer`,
 which hands each stream's bytes to :meth:`ModbusSimServer.take_bytes`; the server here
@@ -159,6 +162,7 @@ class ModbusSimServer:
                     if result.error == 'CRC error':
                         self.stats.crc_errors += 1
                 continue
+            self.line.release_held(connection)  # a request came: late_batched replies go
             fault = self._draw_fault(result.frame, MODBUS_FAULTS)
             reply = self._answer(result.frame, raw, fault)
             if reply is None:
@@ -170,7 +174,7 @@ class ModbusSimServer:
             if fault is not None and data:
                 data = mangle_rtu_reply(fault, data, self.faults)
             if data:
-                self._send_rtu(connection, raw, data, fault == 'slow')
+                self._send_rtu(connection, raw, data, fault)
 
     def _draw_fault(self, frame: RtuFrame, usable: tuple) -> Optional[str]:
         """Return the fault to inject into the reply to ``frame``, if the unit is served."""
@@ -179,14 +183,21 @@ class ModbusSimServer:
         return self.faults.draw(frame.unit, usable)
 
     def _send_rtu(self, connection: Connection, request: bytes, reply: bytes,
-                  slow: bool = False) -> None:
-        delay = self.faults.plan.slow_s if slow else 0.0
+                  fault: Optional[str] = None) -> None:
+        """Write ``reply`` when it is due: at once, at wire time, or as ``fault`` says."""
+        due = self.clock()
         if self.wire is not None:
             due = self.wire.reply_due(connection.first_byte_s, len(request), len(reply))
-            delay += due - self.clock()
-        if delay > 0:
-            time.sleep(delay)
-        connection.write(reply)
+        self._send(connection, reply, fault, due)
+
+    def _send(self, connection: Connection, reply: bytes, fault: Optional[str],
+              normal_due_s: float) -> None:
+        """Write, schedule or hold ``reply``: ``fault`` may make it slow, late or held."""
+        if fault == 'late_batched':
+            self.line.hold(connection, reply)
+            return
+        due = self.faults.plan.reply_due_s(fault, connection.last_byte_s, normal_due_s)
+        self.line.send(connection, reply, due)
 
     def _process_mbap(self, connection: Connection) -> None:
         while len(connection.buffer) >= 7:
@@ -201,17 +212,17 @@ class ModbusSimServer:
             unit = connection.buffer[6]
             pdu = connection.buffer[7:6 + length]
             connection.buffer = connection.buffer[6 + length:]
+            self.line.release_held(connection)  # a request came: late_batched replies go
             frame = RtuFrame(unit, pdu[0], bytes(pdu[1:]))
             fault = self._draw_fault(frame, MBAP_FAULTS)
             reply = self._answer(frame, frame.encode(), fault)
             if fault == 'no_reply':  # the target executed, its reply was lost: 0Bh
                 reply = None
-            if fault == 'slow':
-                time.sleep(self.faults.plan.slow_s)
             if reply is None:
                 reply = rtu.exception_response(unit, frame.function, GATEWAY_TARGET_FAILED)
             body = bytes([reply.unit, reply.function]) + reply.data
-            connection.write(struct.pack('>HHH', transaction, 0, len(body)) + body)
+            self._send(connection, struct.pack('>HHH', transaction, 0, len(body)) + body,
+                       fault, self.clock())
 
     def _answer(self, frame: RtuFrame, raw: bytes,
                 fault: Optional[str] = None) -> Optional[RtuFrame]:

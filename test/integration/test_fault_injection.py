@@ -9,7 +9,7 @@ from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.sim import cli as sim_cli
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.faults import (
-    AP_ASCII_FAULTS, FaultInjector, FaultPlan, mangle_rtu_reply, MODBUS_FAULTS)
+    AP_ASCII_FAULTS, FaultInjector, FaultPlan, mangle_rtu_reply, MODBUS_FAULTS, without_late)
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
 from pty_witness import run_unless_a_pty_lagged
@@ -99,7 +99,7 @@ def test_ap_ascii_faults_are_counted_by_kind():
 
 def count_ap_ascii_faults() -> None:
     line = make_ap_ascii_server({20: 'mcd500', 21: 'mcd3000'})
-    line.faults.set_plan(FaultPlan(0.15, AP_ASCII_FAULTS, seed=4, slow_s=1.5))
+    line.faults.set_plan(FaultPlan(0.15, without_late(AP_ASCII_FAULTS), seed=4, slow_s=1.5))
     path = line.open_pty()
     line.start()
     devices = {'a': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 50.0},

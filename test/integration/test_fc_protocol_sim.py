@@ -5,7 +5,7 @@ import time
 
 from drive_bridge.protocol import fc_telegram as fc
 from drive_bridge.protocol.fc_control import RAMP_STOP_WORD, START_WORD, STW_ON_REFERENCE
-from drive_bridge.sim.faults import FaultPlan
+from drive_bridge.sim.faults import FaultPlan, without_late
 from drive_bridge.sim.fc_protocol_server import (
     FC_PROTOCOL_FAULTS, make_fc_protocol_server, mangle_fc_reply)
 from pty_witness import run_unless_a_pty_lagged
@@ -277,7 +277,8 @@ def test_random_faults_are_seeded_and_counted_per_address_and_kind():
 def random_faults_are_seeded_and_counted() -> None:
     def run(seed):
         server = make_fc_protocol_server({FC51: 'fc51', VLT5000: 'vlt5000'})
-        server.faults.set_plan(FaultPlan(0.5, FC_PROTOCOL_FAULTS, seed, slow_s=0.01))
+        server.faults.set_plan(FaultPlan(0.5, without_late(FC_PROTOCOL_FAULTS), seed,
+                                         slow_s=0.01))
         server.open_pty()
         server.start()
         master = RawMaster(server.pty_path)

@@ -37,7 +37,7 @@ from drive_bridge.config import BridgeConfig, build_config
 from drive_bridge.errors import CommandRefused
 from drive_bridge.protocol import fc_control
 from drive_bridge.sim.devices import make_device
-from drive_bridge.sim.faults import FaultPlan, MODBUS_FAULTS
+from drive_bridge.sim.faults import FaultPlan, MODBUS_FAULTS, without_late
 from drive_bridge.sim.fc_model import ALARM_OVER_CURRENT, TIMEOUT_STOP
 from drive_bridge.sim.lvsg_gateway import LvsgGatewaySim, LvsgSlave
 from drive_bridge.sim.mcd_model import McdModel, McdSimConfig, RUNNING, STARTING
@@ -219,7 +219,9 @@ def make_line(fault_rate: float, seed: int, slow_s: float,
     served = {device.unit: (_sim_device(device, now), device.kind)
               for device in devices if device.model}
     server = RecordingServer(served, clock=clock)
-    server.faults.set_plan(FaultPlan(fault_rate, MODBUS_FAULTS, seed, slow_s=slow_s))
+    # Replies inside the timeout only: late ones (faults.LATE_FAULTS) are not in the soak.
+    kinds = without_late(MODBUS_FAULTS)
+    server.faults.set_plan(FaultPlan(fault_rate, kinds, seed, slow_s=slow_s))
     return server
 
 
