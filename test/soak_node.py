@@ -255,7 +255,7 @@ def run_node_soak(settings: NodeSoakSettings, directory: str) -> NodeSoakReport:
     """Run the node on the soak line for ``settings.duration_s``, SIGTERM it, check it."""
     devices = node_line()
     server = make_line(settings.fault_rate, settings.seed, 0.7 * settings.timeout_s,
-                       devices=devices)
+                       settings.timeout_s, devices=devices)
     port = server.open_pty()
     server.start()
     report = NodeSoakReport()

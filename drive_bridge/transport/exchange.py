@@ -37,7 +37,7 @@ from typing import Any, Callable, List, Optional, Protocol
 from drive_bridge.errors import LineBabble, TransportError
 from drive_bridge.protocol.framing import Frame, Framer, frames_in
 from drive_bridge.transport.base import TransactionReport
-from drive_bridge.transport.reply_window import Accept, ReplyWindow, WindowTiming
+from drive_bridge.transport.reply_window import Accept, ReplyWindow, Shaped, WindowTiming
 
 MAX_READ_BYTES = 512  # one read of whatever is there
 MAX_SCANNED_BYTES = 4096  # discarded bytes looked through for whole frames, at most
@@ -123,12 +123,13 @@ class LineDiscipline:
             self._discard(pending)
             self.quarantine(self.clock())
 
-    def exchange(self, request: bytes, accept: Accept) -> Any:
+    def exchange(self, request: bytes, accept: Accept, shaped: Shaped = None) -> Any:
         """
         Send ``request`` and return what ``accept`` makes of its answer, or raise.
 
         ``accept(frame)`` returns the value of a frame of the unit that answers the request,
-        or raises BadFrame saying why it does not (a late frame). The first exchange of a
+        or raises BadFrame saying why it does not (a late frame); ``shaped``: see
+        :meth:`ReplyWindow.read`. The first exchange of a
         transaction with a suspect unit keeps its window open to the deadline.
         """
         sent_s = self.clock()
@@ -141,7 +142,7 @@ class LineDiscipline:
         try:
             if self.timing.echo:
                 window.read_echo(request, deadline)
-            return window.read(self._unit, accept, len(request), deadline, hold_open)
+            return window.read(self._unit, accept, len(request), deadline, hold_open, shaped)
         finally:
             self._take(window)
 

@@ -76,7 +76,8 @@ class FcProtocolTransport(LineTransport):
             self.discipline.send_only(telegram.encode())
             return None
         reply = self.discipline.exchange(
-            telegram.encode(), lambda received: accept_telegram(request, telegram, received))
+            telegram.encode(), lambda received: accept_telegram(request, telegram, received),
+            lambda received: len(received.raw) < 3 or received.raw[2] == telegram.adr)
         if reply.is_error:
             raise FcParameterError(reply.error_code, reply)
         return reply

@@ -31,6 +31,7 @@ from drive_bridge.protocol.framing import Frame, Framer
 # UART clocks are within a few percent of each other, and USB adapters only delay bytes.
 EARLY_TOLERANCE = 0.1
 Accept = Callable[[Frame], Any]  # the value of a frame that answers, or raise BadFrame
+Shaped = Optional[Callable[[Frame], bool]]  # a corrupt frame has the answer's shape
 _NOTHING = object()
 
 
@@ -60,6 +61,7 @@ class ReplyWindow:
         self.quiet_s = 0.0  # the silence kept after the last byte before returning
         self.answer_s = 0.0  # when the last byte of the answer came (the clock's time)
         self._last_byte_s = 0.0
+        self._shaped: Shaped = None
 
     def read_echo(self, request: bytes, deadline: float) -> None:
         """
@@ -91,9 +93,17 @@ class ReplyWindow:
                                f'{len(buffer)} of {len(request)} bytes came back')
 
     def read(self, unit: Optional[int], accept: Accept, request_bytes: int, deadline: float,
-             hold_open: bool = False) -> Any:
-        """Return the value of the answer of ``unit`` (see the module docstring), or raise."""
+             hold_open: bool = False, shaped: Shaped = None) -> Any:
+        """
+        Return the value of the answer of ``unit`` (see the module docstring), or raise.
+
+        ``shaped(frame)``: whether a corrupt frame, or one cut short, has the answer's shape
+        (its unit and function), so that its checksum error or its end is the answer's
+        (CrcError, TruncatedFrame: noise on the line) rather than garbage (BadFrame); None:
+        any such frame is as its framer says.
+        """
         sent_s = self.sent_s
+        self._shaped = shaped
         buffer, answer, first, others, time_up = b'', _NOTHING, None, 0, False
         while True:
             cut = self.framer.cut(buffer)
@@ -136,7 +146,8 @@ class ReplyWindow:
                            'one corrupt frame)')
         if not frame.valid:
             self.unread = frame.raw
-            error_type = CrcError if frame.kind == 'crc' else BadFrame
+            answer_like = self._shaped is None or self._shaped(frame)
+            error_type = CrcError if frame.kind == 'crc' and answer_like else BadFrame
             raise error_type(f'invalid reply ({frame.error}), {len(frame.raw)} bytes received')
 
     def _answer(self, frame: Frame, accept: Accept, sent_s: float, request_bytes: int) -> Any:
@@ -174,6 +185,9 @@ class ReplyWindow:
         """Return the answer of a window that ran to its deadline, or raise why none."""
         if buffer:
             self.unread = buffer
+            if self._shaped is not None and not self._shaped(Frame(bytes(buffer))):
+                raise BadFrame(f'invalid reply ({_shown(buffer)}: not the answer\'s unit or '
+                               f'function, cut short), {len(buffer)} bytes received')
             needed = self.framer.cut(buffer).needed
             raise TruncatedFrame(f'truncated reply: {_part(buffer, needed)} within '
                                  f'{self.timing.timeout_s:g} s')

@@ -40,6 +40,12 @@ def accept_reply(request: ModbusRequest, sent: RtuFrame, received: Frame) -> Any
     return request.parse(sent, reply)
 
 
+def shaped_like(sent: RtuFrame, received: Frame) -> bool:
+    """Return whether a corrupt or cut frame has the shape of the answer: unit, function."""
+    raw = received.raw
+    return len(raw) < 2 or (raw[0] == sent.unit and raw[1] & 0x7F == sent.function)
+
+
 class RtuSerialTransport(LineTransport):
     """Run single Modbus RTU transactions on one line; the bus thread owns it."""
 
@@ -50,7 +56,8 @@ class RtuSerialTransport(LineTransport):
         """Send ``request`` to ``unit``; return the registers or coils read, or None."""
         sent = request.frame(unit)
         value = self.discipline.exchange(
-            sent.encode(), lambda received: accept_reply(request, sent, received))
+            sent.encode(), lambda received: accept_reply(request, sent, received),
+            lambda received: shaped_like(sent, received))
         if isinstance(value, _Refusal):
             raise DeviceException(value.code)
         return value
