@@ -370,3 +370,97 @@ class CpuHog:
     def __exit__(self, *exc) -> None:
         self.process.kill()
         self.process.wait()
+
+
+class FaultOnStart:
+    """
+    Spoil the reply to the next start a simulator receives by a fault of its own kinds.
+
+    The simulators inject a fault into the next reply of a unit, whatever the request; a
+    polled device's next reply is a poll's. This puts it on the start: an MCD's register
+    40002 = 1 (Modbus, or B10's reply over AP ASCII), a drive's first run word (Modbus coils
+    or registers, or an FC-protocol telegram). ``fired`` is set when it was injected.
+    """
+
+    def __init__(self, server, unit: int, kind: str, then_silent: bool = False):
+        self.server = server
+        self.unit = unit
+        self.kind = kind
+        self.then_silent = then_silent  # the device hears nothing after it executed the start
+        self.fired = threading.Event()
+        self._install()
+
+    def _executed(self) -> None:
+        """After the start was executed: switch the device's answers off if asked."""
+        if self.then_silent:
+            with self.server.lock:
+                self.server.silent_units.add(self.unit)
+
+    def _take(self) -> bool:
+        """Return True once: the fault goes to this reply."""
+        if self.fired.is_set():
+            return False
+        self.server.faults.injected[(self.unit, self.kind)] += 1
+        self.fired.set()
+        return True
+
+    def _install(self) -> None:
+        server = self.server
+        if hasattr(server, '_message_fault'):  # AP ASCII: B10's reply
+            answer = server._answer
+
+            def ascii_answer(fragment):
+                start = fragment.kind == 'message' and fragment.code == 'B10' and \
+                    server._selected == self.unit and self._take()
+                if start:
+                    server._message_fault = self.kind
+                reply = answer(fragment)
+                if start:
+                    self._executed()
+                return reply
+            server._answer = ascii_answer
+        elif hasattr(server, '_serve_telegram'):  # the FC protocol: a run word
+            serve = server._serve_telegram
+
+            def serve_telegram(connection, telegram, raw):
+                draw = server.faults.draw
+                start = telegram.address.address == self.unit and \
+                    is_run_word(telegram.pcd1) and self._take()
+                if start:
+                    server.faults.draw = lambda *args, **kwargs: self.kind
+                try:
+                    serve(connection, telegram, raw)
+                finally:
+                    server.faults.draw = draw
+                if start:
+                    self._executed()
+            server._serve_telegram = serve_telegram
+        else:  # Modbus: the MCD's start or a drive's run word
+            draw_fault, answer = server._draw_fault, server._answer
+
+            def modbus_draw(frame, usable):
+                if frame.unit == self.unit and _modbus_start(frame.function, frame.data) and \
+                        self._take():
+                    return self.kind
+                return draw_fault(frame, usable)
+
+            def modbus_answer(frame, raw, fault=None):
+                reply = answer(frame, raw, fault)
+                if fault == self.kind and frame.unit == self.unit and \
+                        _modbus_start(frame.function, frame.data):
+                    self._executed()
+                return reply
+            server._draw_fault, server._answer = modbus_draw, modbus_answer
+
+
+def _modbus_start(function: int, data: bytes) -> bool:
+    """Return whether a Modbus request starts: MCD 40002 = 1, or an FC-profile run word."""
+    if function == 0x06:
+        address, value = int.from_bytes(data[0:2], 'big'), int.from_bytes(data[2:4], 'big')
+        return (address == 1 and value == MCD_START) or \
+            (address == 49999 and is_run_word(value))
+    if function == 0x0F and int.from_bytes(data[0:2], 'big') == 0 and len(data) >= 7:
+        return is_run_word(data[5] | data[6] << 8)  # coils 1-16, the low byte first
+    if function == 0x10 and int.from_bytes(data[0:2], 'big') == 49999 and len(data) >= 7:
+        return is_run_word(int.from_bytes(data[5:7], 'big'))
+    return False

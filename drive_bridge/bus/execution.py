@@ -17,8 +17,9 @@ from drive_bridge.bus.motor import Motion
 from drive_bridge.bus.seams import LinkState, Transactions
 from drive_bridge.bus.table import DeviceTable
 from drive_bridge.errors import (
-    CommandRefused, DeviceException, LinkDown, MonitorOnly, TransportError)
+    AmbiguousReply, CommandRefused, DeviceException, LinkDown, MonitorOnly, TransportError)
 from drive_bridge.protocol.commands import Command
+from drive_bridge.protocol.requests import Request
 
 
 class CommandExecutor:
@@ -89,7 +90,7 @@ class CommandExecutor:
                 deadman.feed(device, self.clock())
         try:
             for request in plan.writes:
-                self.runner.transact(device, request)
+                self._write(device, command, request)
         except (DeviceException, MonitorOnly) as error:
             raise self._refused(device, command, motion_before, error) from None
         except TransportError as error:
@@ -100,6 +101,22 @@ class CommandExecutor:
                 deadman.feed(device, self.clock())
             device.health.next_due_s = self.clock()  # read the new state at once
         return f'{command.value} acknowledged by {device.name} (address {device.spec.unit})'
+
+    def _write(self, device: BusDevice, command: Command, request: Request) -> None:
+        """
+        Send one write of ``command``; a stop whose acknowledgement was ambiguous goes again.
+
+        An ambiguous acknowledgement (one the device may have sent for an earlier request:
+        :class:`~drive_bridge.errors.AmbiguousReply`) settles what the device owed, so the
+        same write sent once more is answered by its own reply. Only a stop-like command is
+        sent again: a stop repeated is harmless, a start never is.
+        """
+        try:
+            self.runner.transact(device, request)
+        except AmbiguousReply:
+            if not command.stops:
+                raise
+            self.runner.transact(device, request)
 
     def _refused(self, device: BusDevice, command: Command, motion_before: Motion,
                  error: Exception) -> CommandRefused:

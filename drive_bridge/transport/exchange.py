@@ -20,11 +20,13 @@ a request only when it can be nothing else:
   frame, an extra frame) or that saw a late frame: input is read and discarded until the
   guard has passed and the line has been silent for the quarantine silence. Every whole
   frame discarded is counted against the unit it names (:attr:`TransactionReport.late`).
-- **Suspects**: a unit whose last transaction got no frame at all may still owe that reply
+- **Owed replies**: a unit whose last window got no frame at all may still owe that reply
   (a device or gateway that holds it until the next request). Its next transaction keeps its
   first reply window open to the deadline, so that a held reply and the answer, arriving
-  one after the other, are two frames and fail it instead of the held one being taken.
-  Where frames name no unit (AP ASCII) the whole line is the suspect.
+  one after the other, are two frames and fail it. An acknowledgement of a write that would
+  also answer the owed request (the same echo: a drive's next control word after a lost one)
+  fails it too, even alone: it cannot be told from the held one. Where frames name no unit
+  (AP ASCII) the whole line owes. A frame of the unit seen anywhere settles the debt.
 
 The transports (:mod:`.serial_rtu`, :mod:`.ap_ascii`, :mod:`.fc_protocol`) build the request
 bytes and say whether a frame answers their request; the :class:`ByteLine` moves bytes.
@@ -32,7 +34,7 @@ bytes and say whether a frame answers their request; the :class:`ByteLine` moves
 
 from dataclasses import dataclass
 import time
-from typing import Any, Callable, List, Optional, Protocol
+from typing import Any, Callable, Dict, List, Optional, Protocol
 
 from drive_bridge.errors import LineBabble, TransportError
 from drive_bridge.protocol.framing import Frame, Framer, frames_in
@@ -100,11 +102,13 @@ class LineDiscipline:
         self.timing = timing
         self.clock = clock
         self.on_request_sent = on_request_sent
-        self.suspects: set = set()  # units that may owe a reply (see the module docstring)
+        # units that may owe a reply, with what would accept it (see the module docstring)
+        self.owed: Dict[Optional[int], Accept] = {}
         self.report = TransactionReport()
         self._unit: Optional[int] = None
         self._first_window = True
         self._window_discards = False  # a window of this transaction discarded something
+        self._accept: Optional[Accept] = None  # the last window's: what would answer it
         self._answer_s = 0.0  # when the last answer of this transaction came
 
     def key(self, unit: Optional[int]) -> Optional[int]:
@@ -115,7 +119,7 @@ class LineDiscipline:
     def begin(self, unit: int) -> None:
         """Start a transaction with ``unit``: anything already there came late."""
         self.report = TransactionReport()
-        self._unit, self._first_window = unit, True
+        self._unit, self._first_window, self._accept = unit, True, None
         self._window_discards = False
         self._answer_s = 0.0
         pending = self.line.read(MAX_READ_BYTES, 0.0)
@@ -123,26 +127,30 @@ class LineDiscipline:
             self._discard(pending)
             self.quarantine(self.clock())
 
-    def exchange(self, request: bytes, accept: Accept, shaped: Shaped = None) -> Any:
+    def exchange(self, request: bytes, accept: Accept, shaped: Shaped = None,
+                 acknowledges: bool = False) -> Any:
         """
         Send ``request`` and return what ``accept`` makes of its answer, or raise.
 
         ``accept(frame)`` returns the value of a frame of the unit that answers the request,
         or raises BadFrame saying why it does not (a late frame); ``shaped``: see
-        :meth:`ReplyWindow.read`. The first exchange of a
+        :meth:`ReplyWindow.read`. ``acknowledges``: the answer acknowledges a write (the
+        request's whole answer, not the first of several fragments): it must not be one that
+        would also answer a request the unit still owes. The first exchange of a
         transaction with a suspect unit keeps its window open to the deadline.
         """
         sent_s = self.clock()
         deadline = sent_s + self.timing.timeout_s
         self.line.write(request, deadline)
         self.on_request_sent()
-        hold_open = self._first_window and self.key(self._unit) in self.suspects
-        self._first_window = False
+        owed = self.owed.get(self.key(self._unit)) if self._first_window else None
+        self._first_window, self._accept = False, accept
         window = ReplyWindow(self.line, self.framer, self._window_timing(), sent_s, self.clock)
         try:
             if self.timing.echo:
                 window.read_echo(request, deadline)
-            return window.read(self._unit, accept, len(request), deadline, hold_open, shaped)
+            return window.read(self._unit, accept, len(request), deadline, owed, shaped,
+                               acknowledges)
         finally:
             self._take(window)
 
@@ -155,7 +163,7 @@ class LineDiscipline:
     def failed(self, error: TransportError) -> None:
         """End a transaction that failed on the line: mark a suspect, quarantine."""
         if _no_frame_came(error):  # the window that failed got nothing of the unit
-            self.suspects.add(self.key(self._unit))
+            self.owed[self.key(self._unit)] = self._accept
         self.quarantine(self.clock())
 
     def done(self) -> None:
@@ -209,7 +217,7 @@ class LineDiscipline:
     def _take(self, window: ReplyWindow) -> None:
         """Take a window's discarded frames and what it saw of the unit into the report."""
         if window.unit_seen:
-            self.suspects.discard(self.key(self._unit))
+            self.owed.pop(self.key(self._unit), None)
         self._window_discards = self._window_discards or bool(window.late or window.unread)
         self._count(window.late)
         self.report.noise_bytes += len(window.unread)  # part of a corrupt frame
@@ -229,7 +237,7 @@ class LineDiscipline:
     def _count(self, frames: List[Frame]) -> None:
         for frame in frames:
             self.report.late.append(frame)
-            self.suspects.discard(self.key(frame.unit))
+            self.owed.pop(self.key(frame.unit), None)
 
 
 def _no_frame_came(error: TransportError) -> bool:

@@ -77,7 +77,8 @@ class FcProtocolTransport(LineTransport):
             return None
         reply = self.discipline.exchange(
             telegram.encode(), lambda received: accept_telegram(request, telegram, received),
-            lambda received: len(received.raw) < 3 or received.raw[2] == telegram.adr)
+            lambda received: len(received.raw) < 3 or received.raw[2] == telegram.adr,
+            request.writes)
         if reply.is_error:
             raise FcParameterError(reply.error_code, reply)
         return reply

@@ -9,8 +9,9 @@ for the line discipline (:mod:`.exchange`), which one is the answer:
   before the request and it could have crossed the wire (a paced line only: a real UART),
   and the line then stays silent for the inter-frame gap (end of frame: bytes within the
   gap make it one corrupt frame). Otherwise it is a late frame and the transaction fails;
-- a window held open (a suspect unit) reads on to the deadline: a second frame of the unit
-  fails the transaction as ambiguous, whichever came first;
+- a window held open (a unit that owes an earlier reply) reads on to the deadline: a
+  second frame of the unit fails the transaction as ambiguous, whichever came first, and so
+  does a single acknowledgement of a write that would also acknowledge the owed request;
 - a corrupt frame or bytes that begin no frame fail it at once; the quarantine that follows
   reads the rest.
 
@@ -93,9 +94,15 @@ class ReplyWindow:
                                f'{len(buffer)} of {len(request)} bytes came back')
 
     def read(self, unit: Optional[int], accept: Accept, request_bytes: int, deadline: float,
-             hold_open: bool = False, shaped: Shaped = None) -> Any:
+             owed: Optional[Accept] = None, shaped: Shaped = None,
+             acknowledges: bool = False) -> Any:
         """
         Return the value of the answer of ``unit`` (see the module docstring), or raise.
+
+        ``owed``: what would accept the answer to an earlier request of the unit that got
+        none: the window is then held open to its deadline; and when the answer
+        ``acknowledges`` a write, a frame that ``owed`` accepts too is no acknowledgement
+        (it may be the held one: an ambiguous acknowledgement counts as none).
 
         ``shaped(frame)``: whether a corrupt frame, or one cut short, has the answer's shape
         (its unit and function), so that its checksum error or its end is the answer's
@@ -131,9 +138,10 @@ class ReplyWindow:
                 self.late.extend((first, frame))
                 raise AmbiguousReply(f'two frames {_from(frame)} in one reply window: neither '
                                      'is provably the answer (a late reply came with it)')
-            value = self._answer(frame, accept, sent_s, request_bytes)
+            value = self._answer(frame, accept, sent_s, request_bytes,
+                                 owed if acknowledges else None)
             self.answer_s = self._last_byte_s
-            if not hold_open:
+            if owed is None:
                 return self._end_of_frame(frame, value)
             answer, first = value, frame
 
@@ -150,9 +158,14 @@ class ReplyWindow:
             error_type = CrcError if frame.kind == 'crc' and answer_like else BadFrame
             raise error_type(f'invalid reply ({frame.error}), {len(frame.raw)} bytes received')
 
-    def _answer(self, frame: Frame, accept: Accept, sent_s: float, request_bytes: int) -> Any:
+    def _answer(self, frame: Frame, accept: Accept, sent_s: float, request_bytes: int,
+                owed: Optional[Accept]) -> Any:
         """Return the value of the unit's ``frame``, or raise: it is a late one."""
         self.unit_seen = True
+        if owed is not None and _accepts(owed, frame):
+            self.late.append(frame)
+            raise AmbiguousReply(f'{frame.describe()} would also acknowledge an earlier '
+                                 'request that got no reply: it cannot be told from a held one')
         if self._too_early(frame, sent_s, request_bytes):
             self.late.append(frame)
             raise MismatchedReply(f'{frame.describe()} was whole before the request and a '
@@ -199,6 +212,15 @@ class ReplyWindow:
                                f'{self.timing.timeout_s:g} s; {others} '
                                f'frame{"s" * (others > 1)} of other units came instead')
         raise NoResponse(f'no reply within {self.timing.timeout_s:g} s')
+
+
+def _accepts(accept: Accept, frame: Frame) -> bool:
+    """Return whether ``accept`` takes ``frame`` as an answer (it raises BadFrame if not)."""
+    try:
+        accept(frame)
+    except BadFrame:
+        return False
+    return True
 
 
 def _from(frame: Frame) -> str:

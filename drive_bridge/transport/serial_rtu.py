@@ -57,7 +57,7 @@ class RtuSerialTransport(LineTransport):
         sent = request.frame(unit)
         value = self.discipline.exchange(
             sent.encode(), lambda received: accept_reply(request, sent, received),
-            lambda received: shaped_like(sent, received))
+            lambda received: shaped_like(sent, received), request.writes)
         if isinstance(value, _Refusal):
             raise DeviceException(value.code)
         return value
