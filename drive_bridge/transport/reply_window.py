@@ -199,8 +199,8 @@ class ReplyWindow:
         if buffer:
             self.unread = buffer
             if self._shaped is not None and not self._shaped(Frame(bytes(buffer))):
-                raise BadFrame(f'invalid reply ({_shown(buffer)}: not the answer\'s unit or '
-                               f'function, cut short), {len(buffer)} bytes received')
+                raise BadFrame(f'invalid reply ({_shown(buffer)}: cut short, and not the unit '
+                               f'and function of the answer), {len(buffer)} bytes received')
             needed = self.framer.cut(buffer).needed
             raise TruncatedFrame(f'truncated reply: {_part(buffer, needed)} within '
                                  f'{self.timing.timeout_s:g} s')
