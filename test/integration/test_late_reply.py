@@ -9,12 +9,17 @@ and every frame they discard is counted against the unit it names (issue 40).
 """
 
 from contextlib import contextmanager
+from dataclasses import replace
 
-from drive_bridge.errors import (
-    AmbiguousReply, BadFrame, NoResponse, TransportError)
+from drive_bridge.bus.events import ReadingEvent
+from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
+from drive_bridge.devices.mcd import McdProfile
+from drive_bridge.errors import AmbiguousReply, BadFrame, NoResponse, TransportError
 from drive_bridge.protocol import ap_ascii, rtu
 from drive_bridge.protocol import fc_telegram as fc
 from drive_bridge.protocol.requests import AsciiCommand, ReadRegisters, WriteRegister
+from drive_bridge.sim.faults import FaultPlan
+from drive_bridge.sim.mcd_device import make_mcd_server
 from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.link import LinkSettings
 from integration_helpers import wait_until
@@ -236,3 +241,38 @@ def test_a_late_fc_reply_in_the_guard_is_discarded_and_the_next_answer_is_its_ow
                           NoResponse)
         assert late_units(transport) == [1]
         assert transport.execute(1, fc.process_request(0x047C, 0x2222)).pcd2 == 0x2222
+
+
+# -- the bus against the simulator's late replies ---------------------------------------------
+def test_a_device_that_answers_only_late_goes_offline_publishes_nothing_and_comes_back():
+    """Every reply of one starter comes 20 ms after the timeout; the other keeps its rate."""
+    server = make_mcd_server({20: 'mcd500', 21: 'mcd202'})
+    server.open_pty()
+    server.start()
+    events = []
+    specs = [DeviceSpec('lagging', 20, McdProfile('mcd500'), poll_rate_hz=10.0),
+             DeviceSpec('other', 21, McdProfile('mcd202'), poll_rate_hz=10.0)]
+    bus = BusMaster(make_transport(LinkSettings(port=server.pty_path, parity='N',
+                                                timeout_s=TIMEOUT_S)),
+                    specs, BusTiming(backoff_max_s=0.5), listener=events.append).start()
+    try:
+        assert wait_until(lambda: bus.snapshot('lagging').online, 5.0)
+        lag = FaultPlan(1.0, ('late',), master_timeout_s=TIMEOUT_S, late_s=0.02,
+                        units=frozenset({20}))
+        server.faults.set_plan(lag)
+        lag_began = len(events)
+        assert wait_until(lambda: bus.snapshot('lagging').online is False, 10.0)
+        offline = len(events)
+        assert wait_until(lambda: int(bus.snapshot('lagging').stats['late_replies']) >= 5, 10.0)
+        readings = [event for event in events[offline:] if isinstance(event, ReadingEvent)]
+        assert [event.device for event in readings if event.device == 'lagging'] == []
+        assert sum(event.device == 'other' for event in readings) >= 10
+        during = [event for event in events[lag_began:offline]
+                  if isinstance(event, ReadingEvent) and event.device == 'lagging']
+        assert len(during) <= 1  # at most the poll cycle that was on the wire when it began
+        server.faults.set_plan(replace(lag, rate=0.0))  # the lag ends
+        assert wait_until(lambda: bus.snapshot('lagging').online is True, 10.0)
+    finally:
+        bus.shutdown(stop_motors=False)
+        server.stop()
+    assert lag_began < offline

@@ -17,8 +17,9 @@ from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 import pytest
-from safety_helpers import DriveProbe, FaultOnStart, McdProbe, wait_for
-from safety_ros import call_later, clean_exit, READY_S, Rig, Session, status_values
+from safety_helpers import DriveProbe, FaultOnStart, MCD_START, MCD_STOP, McdProbe, wait_for
+from safety_ros import (
+    call_later, clean_exit, Lifecycle, READY_S, Rig, Session, status_values)
 
 TIMEOUT_S = 0.3
 MCD = {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 5.0}
@@ -129,3 +130,39 @@ def test_a_start_answered_late_is_unanswered_and_a_stop_is_done_only_by_its_own_
     assert clean_exit(code, output), output
     assert wait_for(rig.probe.stopped, 10.0), 'the node ended with the motor running'
     assert rig.probe.start_edges() == 1
+
+
+def test_a_late_ready_reading_never_settles_a_start_answered_late_and_deactivate_stops(
+        tmp_path):
+    """
+    A late 'ready' and a late start acknowledgement are never taken; deactivate stops it.
+
+    The poll before the start answers late ('ready', taken before the start ran), then the
+    start's reply comes late: neither is taken, nothing stale is published, the motor counts
+    as possibly running until deactivate stops it (read from the simulator).
+    """
+    rig = mcd_rtu()
+    set_plan_timing(rig.server)
+    with Session(rig, tmp_path / 'late_ready.yaml') as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        published_before = len(client.values(rig.name, 'state'))
+        starts = FaultOnStart(rig.server, 20, 'late')
+        rig.server.faults.inject(20, 'late')  # the next poll's reply: 'ready', 20 ms late
+        started = client.call(rig.name, 'start')
+        assert starts.fired.is_set() and not started.success, started.message
+        assert wait_for(rig.probe.moving, 5.0)
+        # The starter runs; no reading may say otherwise, and the motor stays "may run".
+        assert client.spin_until(lambda: client.state(rig.name) in ('starting', 'running'),
+                                 10.0)
+        assert client.spin_until(  # the poll's late reply and the start's, both discarded
+            lambda: int(status_values(client.diagnostics(rig.name)).get('late_replies', 0))
+            >= 2, 10.0), client.diagnostics(rig.name)
+        states = client.values(rig.name, 'state')[published_before:]
+        moving = min(states.index(state) for state in ('starting', 'running') if state in states)
+        assert 'ready' not in states[moving:], states  # nothing stale published
+        values = status_values(client.diagnostics(rig.name))
+        assert 'may be running' in values.get('motor', ''), values
+        assert Lifecycle(client).transition('deactivate')
+        assert wait_for(lambda: not rig.probe.moving(), 10.0), 'deactivate left it running'
+        assert rig.probe.commands() == [MCD_START, MCD_STOP]
