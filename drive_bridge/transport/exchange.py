@@ -102,6 +102,8 @@ class LineDiscipline:
         self.timing = timing
         self.clock = clock
         self.on_request_sent = on_request_sent
+        self._window_timing = WindowTiming(timing.char_s, timing.gap_s, timing.timeout_s,
+                                           timing.paced)
         # units that may owe a reply, with what would accept it (see the module docstring)
         self.owed: Dict[Optional[int], Accept] = {}
         self.report = TransactionReport()
@@ -145,7 +147,7 @@ class LineDiscipline:
         self.on_request_sent()
         owed = self.owed.get(self.key(self._unit)) if self._first_window else None
         self._first_window, self._accept = False, accept
-        window = ReplyWindow(self.line, self.framer, self._window_timing(), sent_s, self.clock)
+        window = ReplyWindow(self.line, self.framer, self._window_timing, sent_s, self.clock)
         try:
             if self.timing.echo:
                 window.read_echo(request, deadline)
@@ -210,10 +212,6 @@ class LineDiscipline:
         self.report.quiet_s = self.clock() - last_s
 
     # -- bookkeeping --------------------------------------------------------------------
-    def _window_timing(self) -> WindowTiming:
-        timing = self.timing
-        return WindowTiming(timing.char_s, timing.gap_s, timing.timeout_s, timing.paced)
-
     def _take(self, window: ReplyWindow) -> None:
         """Take a window's discarded frames and what it saw of the unit into the report."""
         if window.unit_seen:
