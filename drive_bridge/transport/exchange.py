@@ -44,7 +44,7 @@ from drive_bridge.transport.reply_window import Accept, ReplyWindow, Shaped, Win
 MAX_READ_BYTES = 512  # one read of whatever is there
 MAX_SCANNED_BYTES = 4096  # discarded bytes looked through for whole frames, at most
 BABBLE_SILENCES = 4  # talking past the guard this many quarantine silences (at least): babble
-NO_UNIT = None  # the suspect key of a protocol whose frames name no unit
+NO_UNIT = None  # the key of a line whose frames name no unit (it owes as a whole)
 
 
 class ByteLine(Protocol):
@@ -114,7 +114,7 @@ class LineDiscipline:
         self._answer_s = 0.0  # when the last answer of this transaction came
 
     def key(self, unit: Optional[int]) -> Optional[int]:
-        """Return the suspect key of ``unit`` (the line, where frames name no unit)."""
+        """Return the key ``unit`` owes under (the line's, where frames name no unit)."""
         return unit if self.framer.names_units else NO_UNIT
 
     # -- a transaction ------------------------------------------------------------------
@@ -139,7 +139,7 @@ class LineDiscipline:
         :meth:`ReplyWindow.read`. ``acknowledges``: the answer acknowledges a write (the
         request's whole answer, not the first of several fragments): it must not be one that
         would also answer a request the unit still owes. The first exchange of a
-        transaction with a suspect unit keeps its window open to the deadline.
+        transaction with a unit that owes a reply keeps its window open to the deadline.
         """
         sent_s = self.clock()
         deadline = sent_s + self.timing.timeout_s
@@ -163,8 +163,8 @@ class LineDiscipline:
         self.on_request_sent()
 
     def failed(self, error: TransportError) -> None:
-        """End a transaction that failed on the line: mark a suspect, quarantine."""
-        if _no_frame_came(error):  # the window that failed got nothing of the unit
+        """End a transaction that failed on the line: note what the unit owes, quarantine."""
+        if _no_frame_came(error) and self._accept is not None:  # its window got nothing
             self.owed[self.key(self._unit)] = self._accept
         self.quarantine(self.clock())
 

@@ -18,7 +18,7 @@ from drive_bridge.protocol.requests import AP_ASCII_REQUESTS, MODBUS_REQUESTS
 from drive_bridge.settings import Setting
 
 SERIAL_ENGINES = ('native',)
-PYMODBUS_RETIRED = ("pymodbus's serial client was removed in 0.5: it takes the first frame it "
+PYMODBUS_RETIRED = ("pymodbus's serial client was removed after 0.4: it takes the first frame it "
                     'reads, a late reply too; remove serial_engine: the native engine keeps '
                     'the line discipline, see docs/reliability.md, "Late replies"')
 # The quarantine's guard by protocol (late_reply_guard 0): how long after a failed transaction
@@ -68,7 +68,7 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
         'modbus_rtu', 'Modbus RTU on a serial port', 'serial', MODBUS_REQUESTS,
         reply_guard_s=MODBUS_RTU_GUARD_S,
         settings=(Setting('serial_engine', str, 'native',
-                          'Modbus RTU on a serial port: native, the only engine since 0.5',
+                          'Modbus RTU on a serial port: native, the only engine after 0.4',
                           choices=SERIAL_ENGINES, retired=(('pymodbus', PYMODBUS_RETIRED),)),)),
     ProtocolSpec(
         'ap_ascii', 'MCD AP ASCII on a serial port (8N1)', 'serial', AP_ASCII_REQUESTS,

@@ -59,7 +59,7 @@ def test_int_is_accepted_for_a_double():
     ({'protocol': 'canopen'}, {}, "parameter 'protocol' = 'canopen' is invalid"),
     ({'timeout': 0.0}, {}, "parameter 'timeout' = 0.0 is out of range"),
     ({'serial_engine': 'pymodbus'}, {}, "'serial_engine' = 'pymodbus' is invalid: allowed "
-     "native (pymodbus's serial client was removed in 0.5"),
+     "native (pymodbus's serial client was removed after 0.4"),
     ({'late_reply_guard': -0.1}, {}, "'late_reply_guard' = -0.1 is out of range: allowed [0, 10]"),
 ])
 def test_bad_values_give_one_clear_line(bus, device, message):

@@ -94,7 +94,7 @@ def test_a_frame_of_another_unit_is_skipped_counted_and_the_line_quarantined():
     assert clock.now >= 100.0 + TURNAROUND_S + 0.01 + GUARD_S  # quarantined after it
 
 
-def test_only_frames_of_other_units_is_a_wrong_address_and_the_unit_a_suspect():
+def test_only_frames_of_other_units_is_a_wrong_address_and_the_unit_owes_a_reply():
     transport, line, clock = rtu_line([(TURNAROUND_S, registers(21, [5, 6, 7]))])
     with pytest.raises(WrongAddress, match='no reply from address 20'):
         transport.execute(20, READ)
@@ -182,7 +182,7 @@ def test_a_read_after_a_lost_read_of_the_same_block_is_its_answer_when_alone():
     assert transport.execute(20, READ) == [1010, 1011, 1012]
 
 
-def test_another_units_request_is_not_held_open_by_a_suspect():
+def test_another_units_request_is_not_held_open_by_what_one_unit_owes():
     transport, line, clock = rtu_line([], [(TURNAROUND_S, registers(21, [1, 2, 3]))])
     with pytest.raises(NoResponse):
         transport.execute(20, READ)
@@ -206,7 +206,7 @@ def test_bytes_within_the_silence_after_a_reply_make_it_one_corrupt_frame():
 
 
 # -- quarantine -------------------------------------------------------------------------
-def test_a_late_reply_in_the_guard_is_discarded_counted_and_clears_the_suspect():
+def test_a_late_reply_in_the_guard_is_discarded_counted_and_settles_the_debt():
     transport, line, clock = rtu_line([(TIMEOUT_S + 0.02, OLD)], [(TURNAROUND_S, OURS)])
     with pytest.raises(NoResponse):
         transport.execute(20, READ)
