@@ -55,6 +55,12 @@ class TruncatedFrame(BadFrame):
     kind = 'truncated'
 
 
+class Nak(BadFrame):
+    """AP ASCII: the slave answered NAK: it saw a bad LRC and did not act on the fragment."""
+
+    kind = 'nak'
+
+
 class AmbiguousReply(BadFrame):
     """Two frames of the unit in one reply window: neither is provably the answer."""
 
@@ -73,7 +79,7 @@ class MismatchedReply(BadFrame):
 
 
 class LineBabble(LinkDown):
-    """Bytes keep arriving past the transaction's deadline: another master or a faulty device."""
+    """The line keeps talking past a failed transaction's guard: another master or a fault."""
 
     kind = 'babble'
 

@@ -125,43 +125,6 @@ def decode_data(digits: bytes) -> int:
     return int(digits)
 
 
-@dataclass(frozen=True)
-class Reply:
-    """
-    What the reply decoder made of the bytes received so far.
-
-    ``kind`` is 'ACK', 'NAK', 'BEL', 'frame' (``digits`` set) or 'error' (``error`` set);
-    '' means "need more bytes" (``needed`` in all).
-    """
-
-    kind: str = ''
-    digits: bytes = b''
-    error: str = ''
-    needed: int = 1
-
-
-def decode_reply(buffer: bytes) -> Reply:
-    """Decode one slave reply from the start of ``buffer``; never raises."""
-    if not buffer:
-        return Reply(needed=1)
-    first = buffer[0]
-    if first in SINGLE_BYTE_REPLIES:
-        if len(buffer) > 1:
-            return Reply(kind='error', error=f'{len(buffer) - 1} bytes after '
-                                             f'{SINGLE_BYTE_REPLIES[first]}')
-        return Reply(kind=SINGLE_BYTE_REPLIES[first])
-    if first != STX:
-        return Reply(kind='error', error=f'reply starts with {first:02X}h')
-    if len(buffer) < FRAME_BYTES:
-        return Reply(needed=FRAME_BYTES)
-    frame = buffer[:FRAME_BYTES]
-    if len(buffer) > FRAME_BYTES or frame[-1] != ETX:
-        return Reply(kind='error', error='reply is not STX dddd lrc ETX')
-    if not lrc_matches(frame[:5], frame[5:7]):
-        return Reply(kind='error', error='LRC error in the reply')
-    return Reply(kind='frame', digits=bytes(frame[1:5]), needed=FRAME_BYTES)
-
-
 class ReplyFramer:
     """
     AP ASCII replies as a master receives them: the :class:`~.framing.Framer` of AP ASCII.
@@ -170,7 +133,6 @@ class ReplyFramer:
     the slave that sent it (``unit`` None). Any other first byte begins no frame.
     """
 
-    min_bytes = 1
     max_bytes = FRAME_BYTES
     names_units = False
 

@@ -41,7 +41,7 @@ AK 15 (**confirmed**, FC 102/202 Design Guides "Text via PWE block", manual 003 
 Error codes of AK 7 replies: :data:`ERROR_CODES` (sources there). The reply to a write is
 taken to be AK 1/2 with the value (**inferred**: the guides' reply figures are not in their
 text); the reply to a text write is any AK 15 reply (**inferred**). The decoder has
-pymodbus's "need more bytes" contract, like :func:`drive_bridge.protocol.rtu.decode_response`.
+pymodbus's "need more bytes" contract; :class:`ReplyFramer` is the master's framer of replies.
 
 Worked vectors (VLT 5000 Design Guide MG.52.B2.02, FC 300 Design Guide MG.33.B6.22): start
 at 50 % ``02 06 04 04 7C 20 00 58`` -> ``02 06 04 06 07 00 00 01``; read par. 520 ``02 0E 01
@@ -413,7 +413,6 @@ class ReplyFramer:
     corrupt one still names the address of its ADR byte.
     """
 
-    min_bytes = MIN_TELEGRAM_BYTES
     max_bytes = MAX_LGE + 2
     names_units = True
 

@@ -64,15 +64,17 @@ class Cut:
 class Framer(Protocol):
     """Turns received bytes into frames for one wire protocol; pure (see the module)."""
 
-    #: The bytes of the shortest frame: the first wait of a reply window is for these.
-    min_bytes: int
     #: The bytes of the longest frame (a line talking longer without a pause is babbling).
     max_bytes: int
     #: Whether frames name the unit that sent them (AP ASCII's do not).
     names_units: bool
 
     def cut(self, buffer: bytes) -> Cut:
-        """Return the frame at the start of ``buffer``, or what it needs; never raise."""
+        """
+        Return the frame at the start of ``buffer``, or what it needs; never raise.
+
+        For no bytes at all, what the shortest frame needs: a reply window's first wait.
+        """
 
 
 def frames_in(framer: Framer, data: bytes) -> tuple:

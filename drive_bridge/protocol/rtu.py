@@ -124,22 +124,6 @@ _COUNTED_RESPONSES = {READ_COILS, 0x02, READ_HOLDING_REGISTERS, READ_INPUT_REGIS
 MIN_RESPONSE_BYTES = 5  # the shortest response: an exception (unit fc code crc crc)
 
 
-@dataclass(frozen=True)
-class ResponseResult:
-    """
-    What the response decoder made of the bytes received so far.
-
-    ``frame`` when the response is complete and valid; ``error`` when the bytes cannot be
-    the response to the request; otherwise ``needed``: how many bytes the whole response
-    takes, as far as the bytes so far tell (read up to it, then ask again).
-    """
-
-    frame: Optional[RtuFrame] = None
-    error: str = ''
-    needed: int = MIN_RESPONSE_BYTES
-    error_kind: str = ''  # 'wrong_address', 'crc' or 'bad_frame' (anything else)
-
-
 def response_length(buffer: bytes) -> Optional[int]:
     """Return the length of the response at ``buffer[0]``, or None if not known yet."""
     if len(buffer) < 2:
@@ -154,34 +138,6 @@ def response_length(buffer: bytes) -> Optional[int]:
     return None
 
 
-def decode_response(buffer: bytes, unit: int, function: int) -> ResponseResult:
-    """
-    Decode the response of ``unit`` to a request with ``function`` from ``buffer``.
-
-    Never raises: a wrong address or function, an unknown function or a CRC error is
-    an ``error``; too few bytes is "need more" (``needed``).
-    """
-    if len(buffer) >= 1 and buffer[0] != unit:
-        return ResponseResult(error=f'reply from address {buffer[0]}, expected {unit}',
-                              error_kind='wrong_address')
-    if len(buffer) >= 2 and buffer[1] & 0x7F != function:
-        return ResponseResult(error=f'reply with function {buffer[1]:02X}h to a '
-                                    f'{function:02X}h request', error_kind='bad_frame')
-    length = response_length(buffer)
-    if length is None:
-        return ResponseResult(needed=max(len(buffer) + 1, 3))
-    if len(buffer) < length:
-        return ResponseResult(needed=length)
-    candidate = bytes(buffer[:length])
-    if len(buffer) > length:
-        return ResponseResult(error=f'{len(buffer) - length} bytes after the reply',
-                              error_kind='bad_frame')
-    if not crc_ok(candidate):
-        return ResponseResult(error='CRC error', error_kind='crc')
-    return ResponseResult(frame=RtuFrame(candidate[0], candidate[1], candidate[2:-2]),
-                          needed=length)
-
-
 class ReplyFramer:
     """
     Modbus RTU replies as a master receives them: the :class:`~.framing.Framer` of RTU.
@@ -192,7 +148,6 @@ class ReplyFramer:
     frame is valid; a corrupt one still names the unit of its first byte.
     """
 
-    min_bytes = MIN_RESPONSE_BYTES
     max_bytes = MAX_ADU_BYTES
     names_units = True
 

@@ -17,7 +17,7 @@ unanswered: a start may be running, a stop is not done).
 
 from typing import Callable, Optional, Tuple
 
-from drive_bridge.errors import BadFrame, DeviceException
+from drive_bridge.errors import BadFrame, DeviceException, Nak
 from drive_bridge.protocol import ap_ascii
 from drive_bridge.protocol.framing import Frame
 from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest
@@ -27,12 +27,6 @@ import serial
 
 ANSWERS = ('ACK', 'NAK', 'BEL')  # a slave's answers to an address or a command
 DATA_ANSWERS = ('frame', 'NAK', 'BEL')  # its answers to a request
-
-
-class Nak(BadFrame):
-    """The slave answered NAK: it saw a bad LRC and did not act on the fragment."""
-
-    kind = 'nak'
 
 
 def accepting(kinds: Tuple[str, ...], what: str) -> Callable[[Frame], Frame]:

@@ -2,10 +2,13 @@
 The transport contract: what the bus needs from whatever carries its requests.
 
 A transport owns one link (a serial port, or a TCP connection to a gateway) and runs one
-request at a time for the bus thread. Every wait inside :meth:`Transport.execute` is bounded
-by the transaction's deadline (the link's ``timeout_s`` from the moment the request is
-sent): a line that keeps talking past it is a :class:`~drive_bridge.errors.LineBabble`.
-Failures are the typed errors of :mod:`drive_bridge.errors`.
+request at a time for the bus thread. Every wait inside :meth:`Transport.execute` is bounded:
+a reply window by the transaction's deadline (the link's ``timeout_s`` from the moment the
+request is sent); on a line without transaction ids a quarantine follows a failed
+transaction, to its deadline and a guard after it, before the error is raised, and one may
+go before a request when late bytes wait (:mod:`drive_bridge.transport.exchange`). A line
+that keeps talking past a guard is a :class:`~drive_bridge.errors.LineBabble`. Failures are
+the typed errors of :mod:`drive_bridge.errors`.
 """
 
 from abc import ABC, abstractmethod
@@ -15,6 +18,28 @@ from typing import Any, Callable, Dict, List
 from drive_bridge.protocol.framing import Frame
 from drive_bridge.protocol.requests import Request
 from drive_bridge.transport.link import LinkSettings
+
+
+@dataclass(frozen=True)
+class LineTiming:
+    """
+    The times of a line that the line discipline keeps, in seconds.
+
+    ``gap_s``: the protocol's inter-frame silence (the end-of-frame check);
+    ``quarantine_silence_s``: the silence that ends a quarantine (at least the gap, longer
+    where USB adapters deliver bytes in batches); ``guard_s``: how long after a reply window's
+    deadline late replies are still waited for; ``paced``: bytes arrive at the wire's pace (a
+    real UART), so a reply complete too soon to be ours is not ours. ``echo``: the adapter
+    echoes what it sends.
+    """
+
+    char_s: float
+    gap_s: float
+    timeout_s: float
+    guard_s: float
+    quarantine_silence_s: float
+    paced: bool = False
+    echo: bool = False
 
 
 @dataclass
@@ -28,7 +53,8 @@ class TransactionReport:
     returned (the bus counts it towards the gap before the next request). The round trip
     leaves out ``after_answer_s``, the time from the last byte of the answer to the return
     (the end-of-frame silence, a window held open, a quarantine), and ``held_s``, the time
-    earlier windows of the transaction stayed open after their answers.
+    earlier windows of the transaction stayed open after their answers and a quarantine
+    before the request took.
     """
 
     late: List[Frame] = field(default_factory=list)

@@ -17,29 +17,31 @@ a request only when it can be nothing else:
 - **End of frame**: bytes that continue within the inter-frame silence after a frame make
   it one corrupt frame.
 - **Quarantine** after a transaction that ended badly (no reply, a corrupt or truncated
-  frame, an extra frame) or that saw a late frame: input is read and discarded until the
-  guard has passed and the line has been silent for the quarantine silence. Every whole
-  frame discarded is counted against the unit it names (:attr:`TransactionReport.late`).
-- **Owed replies**: a unit whose last window got no frame at all may still owe that reply
-  (a device or gateway that holds it until the next request). Its next transaction keeps its
-  first reply window open to the deadline, so that a held reply and the answer, arriving
-  one after the other, are two frames and fail it. An acknowledgement of a write that would
-  also answer the owed request (the same echo: a drive's next control word after a lost one)
-  fails it too, even alone: it cannot be told from the held one. Where frames name no unit
-  (AP ASCII) the whole line owes. A frame of the unit seen anywhere settles the debt.
+  frame, an extra frame): input is read and discarded until the guard after the failed
+  window's deadline has passed (the device may still answer until then, however soon the
+  window failed) and the line has been silent for the quarantine silence; after one that saw
+  a late frame, or before a request when bytes wait, from then on. Every whole frame
+  discarded is counted against the unit it names (:attr:`TransactionReport.late`).
+- **Owed replies**: a unit whose last window got no whole valid frame of it may still owe
+  that reply (a device or gateway that holds it until the next request). Its next
+  transaction keeps its first reply window open to the deadline, so that a held reply and
+  the answer, arriving one after the other, are two frames and fail it. An acknowledgement
+  of a write that would also answer the owed request (the same echo: a drive's next control
+  word after a lost one) fails it too, even alone: it cannot be told from the held one.
+  Where frames name no unit (AP ASCII) the whole line owes. A frame of the unit seen
+  anywhere settles the debt.
 
 The transports (:mod:`.serial_rtu`, :mod:`.ap_ascii`, :mod:`.fc_protocol`) build the request
 bytes and say whether a frame answers their request; the :class:`ByteLine` moves bytes.
 """
 
-from dataclasses import dataclass
 import time
 from typing import Any, Callable, Dict, List, Optional, Protocol
 
 from drive_bridge.errors import LineBabble, TransportError
 from drive_bridge.protocol.framing import Frame, Framer, frames_in
-from drive_bridge.transport.base import TransactionReport
-from drive_bridge.transport.reply_window import Accept, ReplyWindow, Shaped, WindowTiming
+from drive_bridge.transport.base import LineTiming, TransactionReport
+from drive_bridge.transport.reply_window import Accept, ReplyWindow, Shaped
 
 MAX_READ_BYTES = 512  # one read of whatever is there
 MAX_SCANNED_BYTES = 4096  # discarded bytes looked through for whole frames, at most
@@ -70,27 +72,6 @@ class ByteLine(Protocol):
         """Wait ``timeout_s`` (less if bytes arrive) and return what is there, no more."""
 
 
-@dataclass(frozen=True)
-class LineTiming:
-    """
-    The times of one line, in seconds.
-
-    ``gap_s``: the protocol's inter-frame silence (the end-of-frame check);
-    ``quarantine_silence_s``: the silence that ends a quarantine (at least the gap, longer
-    where USB adapters deliver bytes in batches); ``guard_s``: how long after a failure late
-    replies are still waited for; ``paced``: bytes arrive at the wire's pace (a real UART),
-    so a reply complete too soon to be ours is not ours. ``echo``: the adapter echoes.
-    """
-
-    char_s: float
-    gap_s: float
-    timeout_s: float
-    guard_s: float
-    quarantine_silence_s: float
-    paced: bool = False
-    echo: bool = False
-
-
 class LineDiscipline:
     """Run the transactions of one line; see the module docstring."""
 
@@ -102,8 +83,6 @@ class LineDiscipline:
         self.timing = timing
         self.clock = clock
         self.on_request_sent = on_request_sent
-        self._window_timing = WindowTiming(timing.char_s, timing.gap_s, timing.timeout_s,
-                                           timing.paced)
         # units that may owe a reply, with what would accept it (see the module docstring)
         self.owed: Dict[Optional[int], Accept] = {}
         self.report = TransactionReport()
@@ -111,6 +90,10 @@ class LineDiscipline:
         self._first_window = True
         self._window_discards = False  # a window of this transaction discarded something
         self._accept: Optional[Accept] = None  # the last window's: what would answer it
+        self._deadline = 0.0  # the last window's deadline
+        self._unit_seen = False  # the last window saw a whole valid frame of the unit
+        self._answered_badly = False  # the last window: a corrupt answer-shaped frame
+        self._owed_before = False  # the unit owed a reply when this transaction began
         self._answer_s = 0.0  # when the last answer of this transaction came
 
     def key(self, unit: Optional[int]) -> Optional[int]:
@@ -122,12 +105,15 @@ class LineDiscipline:
         """Start a transaction with ``unit``: anything already there came late."""
         self.report = TransactionReport()
         self._unit, self._first_window, self._accept = unit, True, None
-        self._window_discards = False
-        self._answer_s = 0.0
+        self._window_discards, self._unit_seen, self._answered_badly = False, False, False
+        self._owed_before = self.key(unit) in self.owed
+        self._answer_s = self._deadline = 0.0
         pending = self.line.read(MAX_READ_BYTES, 0.0)
         if pending:
+            started = self.clock()
             self._discard(pending)
-            self.quarantine(self.clock())
+            self.quarantine(started)
+            self.report.held_s += self.clock() - started  # not the request's round trip
 
     def exchange(self, request: bytes, accept: Accept, shaped: Shaped = None,
                  acknowledges: bool = False) -> Any:
@@ -146,8 +132,8 @@ class LineDiscipline:
         self.line.write(request, deadline)
         self.on_request_sent()
         owed = self.owed.get(self.key(self._unit)) if self._first_window else None
-        self._first_window, self._accept = False, accept
-        window = ReplyWindow(self.line, self.framer, self._window_timing, sent_s, self.clock)
+        self._first_window, self._accept, self._deadline = False, accept, deadline
+        window = ReplyWindow(self.line, self.framer, self.timing, sent_s, self.clock)
         try:
             if self.timing.echo:
                 window.read_echo(request, deadline)
@@ -157,16 +143,34 @@ class LineDiscipline:
             self._take(window)
 
     def send_only(self, request: bytes) -> None:
-        """Send ``request`` that nobody answers (a broadcast); the line's gap follows."""
-        self._first_window = False
-        self.line.write(request, self.clock() + self.timing.timeout_s)
+        """Send ``request`` that nobody answers (a broadcast); read the adapter's echo."""
+        sent_s = self.clock()
+        self._first_window, self._deadline = False, sent_s + self.timing.timeout_s
+        self.line.write(request, self._deadline)
         self.on_request_sent()
+        if self.timing.echo:
+            window = ReplyWindow(self.line, self.framer, self.timing, sent_s, self.clock)
+            try:
+                window.read_echo(request, self._deadline)
+            finally:
+                self._take(window)
 
     def failed(self, error: TransportError) -> None:
-        """End a transaction that failed on the line: note what the unit owes, quarantine."""
-        if _no_frame_came(error) and self._accept is not None:  # its window got nothing
+        """
+        End a transaction that failed on the line: note what the unit owes, quarantine.
+
+        The quarantine lasts until the guard after the failed window's deadline, however soon
+        it failed (garbage, a corrupt or late frame): the device may still send its answer
+        until then, and it must not be taken for the next request's. A window that got no
+        whole valid frame of the unit leaves the unit owing that answer, unless the unit owed
+        nothing before and a corrupt or cut frame of the answer's shape came (it answered;
+        the line spoiled it).
+        """
+        now = self.clock()
+        answered = self._unit_seen or (self._answered_badly and not self._owed_before)
+        if not answered and self._accept is not None:
             self.owed[self.key(self._unit)] = self._accept
-        self.quarantine(self.clock())
+        self.quarantine(max(now, self._deadline), now)
 
     def done(self) -> None:
         """End a transaction that got its answer; quarantine if it saw a late frame."""
@@ -176,9 +180,12 @@ class LineDiscipline:
             self.report.after_answer_s = self.clock() - self._answer_s
 
     # -- quarantine ---------------------------------------------------------------------
-    def quarantine(self, since_s: float) -> None:
+    def quarantine(self, since_s: float, last_byte_s: Optional[float] = None) -> None:
         """
-        Read and discard input until the guard has passed and the line has been silent.
+        Read and discard input until the guard after ``since_s`` and a silence have passed.
+
+        The silence counts from ``last_byte_s`` (by default ``since_s``), or from the last
+        byte read since.
 
         A line that keeps talking past the guard for longer than the protocol's longest
         frame takes (and four silences) is babbling: LineBabble (another master or a faulty
@@ -189,7 +196,8 @@ class LineDiscipline:
         silence = timing.quarantine_silence_s
         limit = guard_end + max(self.framer.max_bytes * timing.char_s,
                                 BABBLE_SILENCES * silence)
-        last_s, discarded = since_s, b''
+        last_s = since_s if last_byte_s is None else last_byte_s
+        discarded = b''
         while True:
             now = self.clock()
             end = max(guard_end, last_s + silence)
@@ -214,6 +222,7 @@ class LineDiscipline:
     # -- bookkeeping --------------------------------------------------------------------
     def _take(self, window: ReplyWindow) -> None:
         """Take a window's discarded frames and what it saw of the unit into the report."""
+        self._unit_seen, self._answered_badly = window.unit_seen, window.answered_badly
         if window.unit_seen:
             self.owed.pop(self.key(self._unit), None)
         self._window_discards = self._window_discards or bool(window.late or window.unread)
@@ -236,8 +245,3 @@ class LineDiscipline:
         for frame in frames:
             self.report.late.append(frame)
             self.owed.pop(self.key(frame.unit), None)
-
-
-def _no_frame_came(error: TransportError) -> bool:
-    """Return whether a window failed because nothing of the unit came (it may still)."""
-    return error.kind in ('timeout', 'wrong_address')

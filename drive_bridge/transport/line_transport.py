@@ -13,11 +13,11 @@ are the discipline's, the same for every protocol.
 import time
 from typing import Any, Callable, ClassVar, Optional, Tuple
 
-from drive_bridge.errors import BadFrame, LinkDown, NoResponse, TransportError
+from drive_bridge.errors import BadFrame, LinkDown, Nak, NoResponse, TransportError
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.framing import Framer
-from drive_bridge.transport.base import Transport
-from drive_bridge.transport.exchange import ByteLine, LineDiscipline, LineTiming
+from drive_bridge.transport.base import LineTiming, TransactionReport, Transport
+from drive_bridge.transport.exchange import ByteLine, LineDiscipline
 from drive_bridge.transport.link import LinkSettings, port_missing, pty_device, URL_PREFIXES
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialLine
 import serial
@@ -47,10 +47,17 @@ def paced_line(settings: LinkSettings) -> bool:
 
 
 def line_timing(settings: LinkSettings, paced: Optional[bool] = None) -> LineTiming:
-    """Return the line discipline's times for ``settings`` (``paced`` None: find out)."""
+    """
+    Return the line discipline's times for ``settings`` (``paced`` None: find out).
+
+    A TCP line of RTU frames keeps no gap between transactions (``frame_gap_s`` 0), but its
+    frames came off a serial line behind the gateway: the end-of-frame check waits that
+    line's 3.5 characters (at the configured baud rate) for bytes that continue a reply.
+    """
     char_s = rtu.character_time_s(settings.baudrate, settings.effective_parity,
                                   settings.effective_stopbits)
-    gap_s = settings.frame_gap_s
+    gap_s = settings.frame_gap_s or rtu.frame_gap_s(
+        settings.baudrate, settings.effective_parity, settings.effective_stopbits)
     return LineTiming(
         char_s=char_s, gap_s=gap_s, timeout_s=settings.timeout_s, guard_s=settings.guard_s,
         quarantine_silence_s=max(gap_s, QUARANTINE_SILENCE_S),
@@ -59,7 +66,7 @@ def line_timing(settings: LinkSettings, paced: Optional[bool] = None) -> LineTim
 
 def line_failure(error: TransportError) -> bool:
     """Return whether ``error`` ended a transaction badly on the line (quarantine it)."""
-    return isinstance(error, (NoResponse, BadFrame)) and error.kind != 'nak'
+    return isinstance(error, (NoResponse, BadFrame)) and not isinstance(error, Nak)
 
 
 class LineTransport(Transport):
@@ -76,8 +83,10 @@ class LineTransport(Transport):
         super().__init__(settings)
         # ``line``: another byte line than the serial port (a virtual line on a fake clock)
         self.line = line or SerialLine(settings, line_port(settings), open_port)
-        self.discipline = LineDiscipline(self.line, self.framer, line_timing(settings, paced),
-                                         clock, self._request_sent)
+        self._paced = paced  # None: whether the port is a real UART, found out at connect
+        self.discipline = LineDiscipline(self.line, self.framer,
+                                         line_timing(settings, bool(paced)), clock,
+                                         self._request_sent)
 
     @property
     def connected(self) -> bool:
@@ -87,6 +96,8 @@ class LineTransport(Transport):
     def connect(self) -> None:
         """Open the line; raise LinkDown with the reason in words."""
         self.line.connect()
+        if self._paced is None:  # the port exists now: a pty or a UART
+            self.discipline.timing = line_timing(self.settings)
 
     def close(self) -> None:
         """Close the line (idempotent)."""
@@ -94,11 +105,11 @@ class LineTransport(Transport):
 
     def execute(self, unit: int, request) -> Any:
         """Run one request with device ``unit`` under the line discipline; see Transport."""
+        self.last_recovered, self.last_report = {}, TransactionReport()
         if not self.line.is_open:
             raise LinkDown('bus offline: not connected')
         if not isinstance(request, self.requests):
             raise TypeError(f'unsupported request {request!r}')
-        self.last_recovered = {}
         try:
             return self._transact(unit, request)
         except PORT_ERRORS as error:

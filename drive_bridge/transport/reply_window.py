@@ -19,7 +19,6 @@ Every wait ends at the transaction's deadline; nothing here sleeps beyond it but
 inter-frame gap after the answer.
 """
 
-from dataclasses import dataclass
 import time
 from typing import Any, Callable, List, Optional
 
@@ -27,6 +26,7 @@ from drive_bridge.errors import (
     AmbiguousReply, BadFrame, CrcError, MismatchedReply, NoResponse, TruncatedFrame,
     WrongAddress)
 from drive_bridge.protocol.framing import Frame, Framer
+from drive_bridge.transport.base import LineTiming
 
 # A reply complete sooner than this share of its wire time (and the request's) is not ours:
 # UART clocks are within a few percent of each other, and USB adapters only delay bytes.
@@ -36,20 +36,10 @@ Shaped = Optional[Callable[[Frame], bool]]  # a corrupt frame has the answer's s
 _NOTHING = object()
 
 
-@dataclass(frozen=True)
-class WindowTiming:
-    """The times a window keeps, in seconds; ``paced``: a real UART (see the module)."""
-
-    char_s: float
-    gap_s: float
-    timeout_s: float
-    paced: bool = False
-
-
 class ReplyWindow:
     """Read one reply window; see the module docstring."""
 
-    def __init__(self, line, framer: Framer, timing: WindowTiming, sent_s: float,
+    def __init__(self, line, framer: Framer, timing: LineTiming, sent_s: float,
                  clock: Callable[[], float] = time.monotonic):
         self.line = line
         self.sent_s = sent_s  # when the request of this window went out (the clock's time)
@@ -59,6 +49,7 @@ class ReplyWindow:
         self.late: List[Frame] = []  # whole frames that were not the answer
         self.unread = b''  # bytes read and not taken (the quarantine counts them)
         self.unit_seen = False  # a whole valid frame of the unit came
+        self.answered_badly = False  # a corrupt or cut frame with the answer's shape came
         self.quiet_s = 0.0  # the silence kept after the last byte before returning
         self.answer_s = 0.0  # when the last byte of the answer came (the clock's time)
         self._last_byte_s = 0.0
@@ -128,33 +119,32 @@ class ReplyWindow:
                     self._last_byte_s = self.clock()
                 time_up = len(chunk) < missing and self.clock() >= deadline
                 continue
-            frame, buffer = cut.frame, buffer[len(cut.frame.raw):]
-            self._check_whole(frame, buffer)
+            frame, buffer = cut.frame, buffer[len(cut.frame.raw):]  # reads take no more
+            self._check_valid(frame)
             if self.framer.names_units and frame.unit != unit:
                 self.late.append(frame)
                 others += 1
                 continue
             if answer is not _NOTHING:
                 self.late.extend((first, frame))
-                raise AmbiguousReply(f'two frames {_from(frame)} in one reply window: neither '
-                                     'is provably the answer (a late reply came with it)')
+                raise AmbiguousReply(f'two frames in one reply window, the second '
+                                     f'{frame.describe()}: neither is provably the answer (a '
+                                     'late reply came with it)')
             value = self._answer(frame, accept, sent_s, request_bytes,
                                  owed if acknowledges else None)
             self.answer_s = self._last_byte_s
+            value = self._end_of_frame(frame, value)
             if owed is None:
-                return self._end_of_frame(frame, value)
-            answer, first = value, frame
+                return value
+            answer, first = value, frame  # held open: read on to the deadline
 
     # -- the frames -----------------------------------------------------------------------
-    def _check_whole(self, frame: Frame, rest: bytes) -> None:
-        """Raise unless ``frame`` is valid and no byte came right behind it (end of frame)."""
-        if rest:
-            self.unread = frame.raw + rest
-            raise BadFrame(f'invalid reply ({len(rest)} bytes right after {frame.describe()}: '
-                           'one corrupt frame)')
+    def _check_valid(self, frame: Frame) -> None:
+        """Raise unless ``frame`` is whole and valid (a checksum error, or garbage)."""
         if not frame.valid:
             self.unread = frame.raw
             answer_like = self._shaped is None or self._shaped(frame)
+            self.answered_badly = answer_like
             error_type = CrcError if frame.kind == 'crc' and answer_like else BadFrame
             raise error_type(f'invalid reply ({frame.error}), {len(frame.raw)} bytes received')
 
@@ -202,6 +192,7 @@ class ReplyWindow:
                 raise BadFrame(f'invalid reply ({_shown(buffer)}: cut short, and not the unit '
                                f'and function of the answer), {len(buffer)} bytes received')
             needed = self.framer.cut(buffer).needed
+            self.answered_badly = True
             raise TruncatedFrame(f'truncated reply: {_part(buffer, needed)} within '
                                  f'{self.timing.timeout_s:g} s')
         if answer is not _NOTHING:
@@ -221,10 +212,6 @@ def _accepts(accept: Accept, frame: Frame) -> bool:
     except BadFrame:
         return False
     return True
-
-
-def _from(frame: Frame) -> str:
-    return 'naming no unit' if frame.unit is None else f'from address {frame.unit}'
 
 
 def _shown(data: bytes) -> str:

@@ -121,7 +121,8 @@ class AsciiCodec:
         return ap_ascii.FRAME_BYTES if buffer[0] == ap_ascii.STX else 1
 
     def reply(self, data: bytes, at_s: float) -> Reply:
-        assert ap_ascii.decode_reply(data).kind in ('ACK', 'NAK', 'BEL', 'frame'), data
+        frame = ap_ascii.ReplyFramer.cut(data).frame
+        assert frame is not None and frame.valid and len(frame.raw) == len(data), data
         return Reply(0, data[0], None, data, at_s)
 
 

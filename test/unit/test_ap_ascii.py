@@ -67,19 +67,21 @@ def test_data_digits():
             ap_ascii.decode_data(bad)
 
 
-def test_reply_decoder_need_more_bytes_and_errors():
+def test_reply_framer_need_more_bytes_and_errors():
+    framer = ap_ascii.ReplyFramer
     reply = ap_ascii.data_fragment(b'0080')
-    assert ap_ascii.decode_reply(b'').needed == 1
+    assert framer.cut(b'').needed == 1
     for cut in range(1, len(reply)):
-        assert ap_ascii.decode_reply(reply[:cut]) == ap_ascii.Reply(needed=8)
-    assert ap_ascii.decode_reply(reply) == ap_ascii.Reply(kind='frame', digits=b'0080',
-                                                          needed=8)
+        assert framer.cut(reply[:cut]).needed == 8
+    frame = framer.cut(reply).frame
+    assert frame.valid and frame.unit is None and ap_ascii.reply_kind(frame) == 'frame'
+    assert frame.raw[1:5] == b'0080'
     for byte, kind in ((0x06, 'ACK'), (0x15, 'NAK'), (0x07, 'BEL')):
-        assert ap_ascii.decode_reply(bytes([byte])).kind == kind
+        assert ap_ascii.reply_kind(framer.cut(bytes([byte])).frame) == kind
     bad_lrc = reply[:5] + b'00' + reply[-1:]
-    assert ap_ascii.decode_reply(bad_lrc).error == 'LRC error in the reply'
-    assert ap_ascii.decode_reply(b'\x41').kind == 'error'
-    assert ap_ascii.decode_reply(b'\x06\x06').kind == 'error'
+    assert framer.cut(bad_lrc).frame.error == 'LRC error in the reply'
+    assert framer.cut(b'\x41').garbage
+    assert framer.cut(b'\x06\x06').frame.raw == b'\x06'  # the second: another frame
 
 
 def test_profile_requests_and_commands():

@@ -10,7 +10,7 @@ silent. Seeded by hypothesis's database-free default settings, so failures repro
 from drive_bridge.config import build_device
 from drive_bridge.devices.contracts import FixedControl
 from drive_bridge.errors import ModelMismatch, ProtocolError, TransportError
-from drive_bridge.protocol import ap_ascii, lvsg, rtu
+from drive_bridge.protocol import ap_ascii, fc_telegram, lvsg, rtu
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.crc import append_crc, crc_ok
 from drive_bridge.protocol.fc_control import StatusWord
@@ -30,7 +30,6 @@ from hypothesis import given, HealthCheck, settings, strategies as st
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow])
 WIRE = st.binary(max_size=300)
-UNITS = st.integers(0, 255)
 FUNCTIONS = st.sampled_from([0x01, 0x03, 0x05, 0x06, 0x0F, 0x10, 0x04, 0x2B, 0x83, 0x00])
 
 VALID_REQUESTS = [
@@ -77,26 +76,30 @@ def test_request_decoder_never_raises(buffer, gap_elapsed):
 
 
 @FUZZ
-@given(st.one_of(WIRE, mutated([reply for reply, _, _ in VALID_REPLIES])), UNITS, FUNCTIONS)
-def test_response_decoder_never_raises(buffer, unit, function):
-    result = rtu.decode_response(buffer, unit, function)
-    if result.frame is not None:
-        assert result.frame.unit == unit and crc_ok(buffer)
-    elif not result.error:
-        assert result.needed > len(buffer)  # "need more" always asks for more
+@given(st.one_of(WIRE, mutated([reply for reply, _, _ in VALID_REPLIES])))
+def test_reply_framers_never_raise(buffer):
+    for framer in (rtu.ReplyFramer, ap_ascii.ReplyFramer, fc_telegram.ReplyFramer):
+        result = framer.cut(buffer)
+        if result.frame is not None:
+            assert buffer.startswith(result.frame.raw) and result.frame.raw
+        elif not result.garbage:
+            assert result.needed > len(buffer)  # "need more" always asks for more
+    frame = rtu.ReplyFramer.cut(buffer).frame
+    if frame is not None and frame.valid:
+        assert crc_ok(frame.raw) and frame.unit == buffer[0]
 
 
 @FUZZ
 @given(st.sampled_from(VALID_REPLIES), st.data())
-def test_response_decoder_reads_a_reply_arriving_in_pieces(case, data):
+def test_the_rtu_framer_reads_a_reply_arriving_in_pieces(case, data):
     reply, unit, function = case
     buffer, cuts = b'', sorted(data.draw(st.lists(st.integers(1, len(reply)), max_size=4)))
     for end in cuts + [len(reply)]:
         buffer = reply[:end]
-        result = rtu.decode_response(buffer, unit, function)
+        result = rtu.ReplyFramer.cut(buffer)
         if end < len(reply):
-            assert result.frame is None and not result.error and result.needed > len(buffer)
-    assert result.frame is not None and result.frame.encode() == reply
+            assert result.frame is None and not result.garbage and result.needed > len(buffer)
+    assert result.frame is not None and result.frame.valid and result.frame.raw == reply
 
 
 def _transport(kind, reply: bytes):
@@ -135,8 +138,8 @@ ASCII_FRAMES = [ap_ascii.address_fragment(20), ap_ascii.message_fragment('C22'),
 @FUZZ
 @given(st.one_of(WIRE, mutated(ASCII_FRAMES)))
 def test_ap_ascii_decoders_never_raise(buffer):
-    reply = ap_ascii.decode_reply(buffer)
-    assert reply.kind or reply.needed > len(buffer)
+    reply = ap_ascii.ReplyFramer.cut(buffer)
+    assert reply.frame is not None or reply.garbage or reply.needed > len(buffer)
     fragment, consumed = ap_ascii.decode_fragment(buffer)
     assert 0 <= consumed <= len(buffer)
 

@@ -8,11 +8,13 @@ protocol cases check what differs (frames that name no unit, telegrams that echo
 """
 
 from drive_bridge.errors import (
-    AmbiguousReply, BadFrame, CrcError, DeviceException, LineBabble, MismatchedReply,
+    AmbiguousReply, BadFrame, CrcError, DeviceException, LineBabble, LinkDown, MismatchedReply,
     NoResponse, TruncatedFrame, WrongAddress)
 from drive_bridge.protocol import ap_ascii, rtu
 from drive_bridge.protocol import fc_telegram as fc
-from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest, ReadRegisters, WriteRegister
+from drive_bridge.protocol.requests import (
+    AsciiCommand, AsciiRequest, ReadRegisters, WriteCoils, WriteRegister)
+from drive_bridge.protocol.words import words_to_coils
 from drive_bridge.transport.ap_ascii import ApAsciiTransport
 from drive_bridge.transport.fc_protocol import FcProtocolTransport
 from drive_bridge.transport.link import LinkSettings
@@ -240,17 +242,116 @@ def test_a_line_that_keeps_talking_is_babble():
         transport.execute(20, READ)
 
 
-@pytest.mark.parametrize('reply, error', [
-    (OURS[:-1] + bytes([OURS[-1] ^ 0xFF]), CrcError),
-    (b'\x14\x99\x00\x00\x00', BadFrame),  # no function a reply carries
-    (OURS[:6], TruncatedFrame),
+@pytest.mark.parametrize('reply, error, owes', [
+    (OURS[:-1] + bytes([OURS[-1] ^ 0xFF]), CrcError, False),  # it answered; noise spoiled it
+    (OURS[:6], TruncatedFrame, False),
+    (b'\x14\x99\x00\x00\x00', BadFrame, True),  # garbage: its answer may still come
 ])
-def test_a_bad_reply_fails_and_the_line_is_quarantined(reply, error):
+def test_a_bad_reply_fails_and_the_line_is_quarantined_to_the_guard_after_the_deadline(
+        reply, error, owes):
     transport, line, clock = rtu_line([(TURNAROUND_S, reply)])
     with pytest.raises(error):
         transport.execute(20, READ)
-    assert clock.now >= 100.0 + TURNAROUND_S + GUARD_S
-    assert 20 not in set(transport.discipline.owed)  # it answered, however badly
+    assert clock.now >= 100.0 + TIMEOUT_S + GUARD_S  # however soon the window failed
+    assert (20 in transport.discipline.owed) is owes
+
+
+# -- early failures (found by an adversarial review) ----------------------------------------
+def device_by_index(respond):
+    """Return a device answering the i-th request with ``respond(i, request)``."""
+    count = [0]
+
+    def device(request, now):
+        count[0] += 1
+        return respond(count[0] - 1, request)
+    return device
+
+
+@pytest.mark.parametrize('noise', [b'\x00' * 5, registers(21, [1, 2])[:-1] + b'\x00'])
+def test_an_answer_in_time_after_early_noise_is_never_the_next_requests(noise):
+    """Noise fails the window at once; the device still answers it at 0.15 s, in time."""
+    def respond(index, request):
+        address = int.from_bytes(request[2:4], 'big')
+        answer = (0.15, registers(20, [address * 100 + i for i in range(3)]))
+        return [(0.002, noise), answer] if index == 0 else [answer]
+    clock = FakeClock()
+    line = ScriptedLine(clock, device_by_index(respond))
+    transport = RtuSerialTransport(SETTINGS, clock=clock, line=line)
+    transport.connect()
+    with pytest.raises(BadFrame):
+        transport.execute(20, ReadRegisters(10, 3))
+    assert transport.execute(20, ReadRegisters(50, 3)) == [5000, 5001, 5002]
+
+
+def test_a_stop_is_never_acknowledged_by_a_starts_acknowledgement_after_early_noise():
+    """A drive's 0F write echoes address and quantity only: every control word's is alike."""
+    start = WriteCoils(0, words_to_coils([0x047F, 0x2000]))
+    stop = WriteCoils(0, words_to_coils([0x043C, 0x2000]))
+    ack = rtu.RtuFrame(20, rtu.WRITE_MULTIPLE_COILS, bytes([0, 0, 0, 32])).encode()
+    transport, line, clock = rtu_line([(0.002, b'\x00' * 5), (0.25, ack)], [])
+    with pytest.raises(BadFrame):
+        transport.execute(20, start)
+    with pytest.raises(NoResponse):  # the busy drive never answered the stop
+        transport.execute(20, stop)
+
+
+@pytest.mark.parametrize('first_window', [
+    [], [(0.002, b'\x00' * 5)], [(0.002, registers(21, [1, 2])[:-1] + b'\x00')]])
+def test_a_reply_held_after_a_window_of_noise_is_never_the_next_answer(first_window):
+    held, second = registers(20, [1010, 1011, 1012]), registers(20, [1050, 1051, 1052])
+    transport, line, clock = rtu_line(first_window, [(0.0, held), (0.01, second)])
+    with pytest.raises(BadFrame if first_window else NoResponse):
+        transport.execute(20, READ)
+    assert 20 in transport.discipline.owed
+    with pytest.raises(AmbiguousReply):
+        transport.execute(20, ReadRegisters(50, 3))
+
+
+def test_a_frame_right_behind_the_answer_in_a_window_held_open_is_one_corrupt_frame():
+    transport, line, clock = rtu_line([], [(TURNAROUND_S, OURS + registers(21, [4, 5, 6]))])
+    with pytest.raises(NoResponse):
+        transport.execute(20, READ)
+    with pytest.raises(BadFrame, match='one corrupt frame'):
+        transport.execute(20, ReadRegisters(50, 3))
+
+
+def test_an_ap_ascii_stop_is_not_acknowledged_by_acks_that_outlived_early_noise():
+    """One noise byte fails B10 at once; its ACK (in time) must not become B12's."""
+    def device(request, now):
+        if request == ap_ascii.message_fragment('B12'):
+            return []
+        noise = [(0.002, b'\x00')] if request == ap_ascii.message_fragment('B10') else []
+        return noise + [(0.35, ACK)]  # in time (0.5 s), after the guard from the noise
+    clock = FakeClock()
+    line = ScriptedLine(clock, device)
+    settings = LinkSettings(protocol='ap_ascii', port='/dev/ttyTEST', timeout_s=0.5)
+    transport = ApAsciiTransport(settings, clock=clock, line=line)
+    transport.connect()
+    with pytest.raises(BadFrame):
+        transport.execute(20, AsciiCommand('B10'))
+    with pytest.raises(NoResponse):
+        transport.execute(20, AsciiCommand('B12'))
+
+
+def test_the_quarantine_before_a_request_is_no_part_of_its_round_trip():
+    transport, line, clock = rtu_line([(TURNAROUND_S, OURS)])
+    line.arrive(0.0, registers(21, [4, 5, 6]))
+    started = clock.now
+    assert transport.execute(20, READ) == [1010, 1011, 1012]
+    report = transport.last_report
+    round_trip_s = clock.now - started - report.held_s - report.after_answer_s
+    assert round_trip_s == pytest.approx(TURNAROUND_S)
+
+
+def test_a_closed_line_reports_nothing_of_the_transaction_before():
+    transport, line, clock = rtu_line([(TURNAROUND_S, registers(21, [9])),
+                                       (TURNAROUND_S + 0.01, OURS)])
+    assert transport.execute(20, READ) == [1010, 1011, 1012]
+    assert late_units(transport) == [21]
+    transport.close()
+    with pytest.raises(LinkDown):
+        transport.execute(20, READ)
+    assert transport.last_report.late == []
 
 
 # -- timing evidence on a real UART -------------------------------------------------------
@@ -382,3 +483,31 @@ def test_a_telegram_from_another_address_is_skipped_and_counted():
                                       (0.03, fc_reply(0x0607, 2))])
     assert transport.execute(1, fc.process_request(0x047C, 0)).pcd2 == 2
     assert late_units(transport) == [2]
+
+
+def test_a_broadcast_on_an_echoing_line_reads_its_echo():
+    settings = LinkSettings(protocol='fc_protocol', port='/dev/ttyTEST', timeout_s=TIMEOUT_S,
+                            local_echo=True)
+    answer = fc_reply(0x0607, 0x1234)
+
+    def device(request, now):
+        return [(0.0, request)] + ([] if request[2] & 0x7F == 0 else [(0.01, answer)])
+    clock = FakeClock()
+    line = ScriptedLine(clock, device)
+    transport = FcProtocolTransport(settings, clock=clock, line=line)
+    transport.connect()
+    assert transport.execute(0, fc.process_request(0x047C, 0)) is None
+    assert transport.execute(1, fc.process_request(0x047C, 0)).pcd2 == 0x1234
+    assert transport.last_report.late == [] and transport.last_report.held_s == 0.0
+
+
+def test_on_rtu_over_tcp_bytes_right_behind_a_reply_are_one_corrupt_frame_too():
+    """No gap between transactions on TCP, but the end-of-frame check keeps the line's."""
+    settings = LinkSettings(protocol='rtu_over_tcp', tcp_port=5020, timeout_s=TIMEOUT_S)
+    clock = FakeClock()
+    line = ScriptedLine(clock, answering([(TURNAROUND_S, OURS), (TURNAROUND_S + 0.001, b'\x00')]))
+    transport = RtuSerialTransport(settings, clock=clock, line=line)
+    transport.connect()
+    assert transport.discipline.timing.gap_s > 0.001
+    with pytest.raises(BadFrame, match='inter-frame silence'):
+        transport.execute(20, READ)

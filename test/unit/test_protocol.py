@@ -110,29 +110,32 @@ def test_fc_actual_value_decodes_signed():
     assert fc_scaling.word_to_percent(0x1999) == pytest.approx(39.996, abs=1e-3)
 
 
-def test_decode_response_needs_more_bytes_until_the_reply_is_whole():
+def test_the_reply_framer_needs_more_bytes_until_the_reply_is_whole():
     # The VLT option card manual's reply to "start at 40 %": 01 0F 00 00 00 20 54 13.
     reply = hexbytes('01 0F 00 00 00 20 54 13')
     for cut in range(len(reply)):
-        result = rtu.decode_response(reply[:cut], 1, 0x0F)
-        assert result.frame is None and not result.error and result.needed > cut
-    expected = rtu.RtuFrame(1, 0x0F, hexbytes('00 00 00 20'))
-    assert rtu.decode_response(reply, 1, 0x0F).frame == expected
+        result = rtu.ReplyFramer.cut(reply[:cut])
+        assert result.frame is None and not result.garbage and result.needed > cut
+    frame = rtu.ReplyFramer.cut(reply).frame
+    assert frame.valid and frame.unit == 1
+    assert rtu.reply_frame(frame) == rtu.RtuFrame(1, 0x0F, hexbytes('00 00 00 20'))
     registers = rtu.registers_response(20, 3, [1, 2, 3]).encode()
-    assert rtu.decode_response(registers[:3], 20, 3).needed == len(registers)
-    assert rtu.decode_response(registers, 20, 3).frame.data == hexbytes('06 00 01 00 02 00 03')
+    assert rtu.ReplyFramer.cut(registers[:3]).needed == len(registers)
+    assert rtu.reply_frame(rtu.ReplyFramer.cut(registers).frame).data == \
+        hexbytes('06 00 01 00 02 00 03')
 
 
-def test_decode_response_errors():
+def test_the_reply_framer_names_the_unit_and_tells_corrupt_frames_and_garbage():
     exception = rtu.exception_response(20, 6, 9).encode()
-    assert rtu.decode_response(exception, 20, 6).frame.function == 0x86
-    assert 'address 21' in rtu.decode_response(rtu.exception_response(21, 6, 9).encode(),
-                                               20, 6).error
-    assert 'function 83h' in rtu.decode_response(rtu.exception_response(20, 3, 2).encode(),
-                                                 20, 6).error
+    assert rtu.reply_frame(rtu.ReplyFramer.cut(exception).frame).function == 0x86
+    assert rtu.ReplyFramer.cut(rtu.exception_response(21, 6, 9).encode()).frame.unit == 21
     corrupted = exception[:-1] + bytes([exception[-1] ^ 1])
-    assert rtu.decode_response(corrupted, 20, 6).error == 'CRC error'
-    assert 'after the reply' in rtu.decode_response(exception + b'\x00', 20, 6).error
+    spoiled = rtu.ReplyFramer.cut(corrupted).frame
+    assert (spoiled.valid, spoiled.kind, spoiled.unit) == (False, 'crc', 20)
+    assert rtu.ReplyFramer.cut(exception + b'\x00').frame.raw == exception  # the rest: later
+    assert rtu.ReplyFramer.cut(b'\x14\x2b').garbage  # no function a reply carries
+    assert rtu.ReplyFramer.cut(b'\x14\x99').needed == 5  # an exception, of function 19h
+    assert rtu.ReplyFramer.cut(b'\x00\x03').garbage and rtu.ReplyFramer.cut(b'\xf8').garbage
 
 
 def test_request_builders_of_the_manuals():
