@@ -326,5 +326,6 @@ def test_a_byte_right_after_a_reply_makes_it_one_corrupt_frame():
         started = time.monotonic()
         with pytest.raises(BadFrame, match='one corrupt frame'):
             transport.execute(20, ReadRegisters(2, 6))
-        assert time.monotonic() - started < 0.6
+        # quarantined to the guard after the deadline: 1 s + 0.1 s, the device may answer
+        assert time.monotonic() - started < 1.1 + 0.5
         assert transport.last_report.noise_bytes == 6

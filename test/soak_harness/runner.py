@@ -172,9 +172,22 @@ class SoakReport:
             (self.silenced if counted_as == 'timeout' else 0)
 
     @property
+    def unexplained(self) -> int:
+        """
+        Return the faults counted neither as their kind nor as an ambiguous reply.
+
+        A fault on the transaction right after one whose window got no valid answer may be
+        counted as ``ambiguous`` instead of its kind: its frame could have been the answer
+        the device still owed (docs/reliability.md, "owed replies").
+        """
+        missing = sum(self.expected(kind) - self.counted[kind] for kind in COUNTED_AS)
+        return max(0, missing - self.counted['ambiguous'])
+
+    @property
     def faults_match(self) -> bool:
-        """Return whether every injected fault was counted as its kind, exactly."""
-        return all(self.counted[kind] == self.expected(kind) for kind in COUNTED_AS)
+        """Return whether every injected fault was counted, as its kind or as ambiguous."""
+        return all(self.counted[kind] <= self.expected(kind) for kind in COUNTED_AS) and \
+            self.unexplained == 0
 
     @property
     def passed(self) -> bool:
@@ -201,9 +214,13 @@ class SoakReport:
         lines.append(f'faults injected -> counted by the bus statistics (no_reply: plus '
                      f'{self.silenced} requests during outages):')
         for counted_as, kinds in COUNTED_AS.items():
-            mark = 'ok' if self.counted[counted_as] == self.expected(counted_as) else 'MISMATCH'
-            lines.append(f'  {"+".join(kinds):17s} {self.expected(counted_as):6d} -> '
-                         f'{counted_as:14s} {self.counted[counted_as]:6d}  {mark}')
+            expected, counted = self.expected(counted_as), self.counted[counted_as]
+            mark = 'ok' if counted == expected else \
+                'MISMATCH' if counted > expected or self.unexplained else 'ambiguous'
+            lines.append(f'  {"+".join(kinds):17s} {expected:6d} -> {counted_as:14s} '
+                         f'{counted:6d}  {mark}')
+        lines.append(f'  {"(any, see above)":17s} {"":6s} -> {"ambiguous":14s} '
+                     f'{self.counted["ambiguous"]:6d}')
         lines += [f'  {text}' for text in self.mismatches]
         lines += [f'longest gap between requests to a device while online: '
                   f'{self.longest_gap_online_s * 1000:.0f} ms',
@@ -602,6 +619,7 @@ def _fill_report(report: SoakReport, run: SoakRun) -> None:
         if not device.model:
             continue
         stats = master.snapshot(device.name).stats  # what /diagnostics shows
+        report.counted['ambiguous'] += int(stats['errors_ambiguous'])
         for counted_as, kinds in COUNTED_AS.items():
             key = 'slow_replies' if counted_as == 'slow' else f'errors_{counted_as}'
             counted = int(stats[key])
@@ -609,7 +627,7 @@ def _fill_report(report: SoakReport, run: SoakRun) -> None:
             injected = sum(server.faults.injected[(device.unit, kind)] for kind in kinds)
             if counted_as == 'timeout':
                 injected += silenced[device.unit]
-            if counted != injected:
+            if counted > injected:
                 report.mismatches.append(f'{device.name}: {"+".join(kinds)} injected '
                                          f'{injected}, counted {counted} ({counted_as}); last '
                                          f'error: {stats["last_error"]}')
