@@ -393,12 +393,17 @@ ACK, NAK, BEL = bytes([ap_ascii.ACK]), bytes([ap_ascii.NAK]), bytes([ap_ascii.BE
 ASCII_SETTINGS = LinkSettings(protocol='ap_ascii', port='/dev/ttyTEST', timeout_s=0.25)
 
 
-def ascii_line(*replies):
+def scripted(transport_class, settings, *replies):
+    """Return (transport of ``transport_class``, line, clock), the device answering so."""
     clock = FakeClock()
     line = ScriptedLine(clock, answering(*replies))
-    transport = ApAsciiTransport(ASCII_SETTINGS, clock=clock, line=line)
+    transport = transport_class(settings, clock=clock, line=line)
     transport.connect()
     return transport, line, clock
+
+
+def ascii_line(*replies):
+    return scripted(ApAsciiTransport, ASCII_SETTINGS, *replies)
 
 
 def test_an_ap_ascii_command_is_acknowledged_by_two_acks():
@@ -451,11 +456,7 @@ FC_SETTINGS = LinkSettings(protocol='fc_protocol', port='/dev/ttyTEST', timeout_
 
 
 def fc_line(*replies):
-    clock = FakeClock()
-    line = ScriptedLine(clock, answering(*replies))
-    transport = FcProtocolTransport(FC_SETTINGS, clock=clock, line=line)
-    transport.connect()
-    return transport, line, clock
+    return scripted(FcProtocolTransport, FC_SETTINGS, *replies)
 
 
 def fc_reply(status: int, value: int, adr: int = 0x81) -> bytes:
@@ -504,10 +505,8 @@ def test_a_broadcast_on_an_echoing_line_reads_its_echo():
 def test_on_rtu_over_tcp_bytes_right_behind_a_reply_are_one_corrupt_frame_too():
     """No gap between transactions on TCP, but the end-of-frame check keeps the line's."""
     settings = LinkSettings(protocol='rtu_over_tcp', tcp_port=5020, timeout_s=TIMEOUT_S)
-    clock = FakeClock()
-    line = ScriptedLine(clock, answering([(TURNAROUND_S, OURS), (TURNAROUND_S + 0.001, b'\x00')]))
-    transport = RtuSerialTransport(settings, clock=clock, line=line)
-    transport.connect()
+    transport, line, clock = scripted(
+        RtuSerialTransport, settings, [(TURNAROUND_S, OURS), (TURNAROUND_S + 0.001, b'\x00')])
     assert transport.discipline.timing.gap_s > 0.001
     with pytest.raises(BadFrame, match='inter-frame silence'):
         transport.execute(20, READ)
