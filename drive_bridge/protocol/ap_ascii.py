@@ -134,6 +134,7 @@ class ReplyFramer:
     """
 
     max_bytes = FRAME_BYTES
+    header_bytes = FRAME_BYTES  # a reply names no unit: no cut one shows whose it is
     names_units = False
 
     @staticmethod

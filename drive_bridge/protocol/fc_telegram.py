@@ -414,6 +414,7 @@ class ReplyFramer:
     """
 
     max_bytes = MAX_LGE + 2
+    header_bytes = 3  # STX, LGE and the ADR byte
     names_units = True
 
     @staticmethod

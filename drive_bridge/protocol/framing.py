@@ -66,6 +66,8 @@ class Framer(Protocol):
 
     #: The bytes of the longest frame (a line talking longer without a pause is babbling).
     max_bytes: int
+    #: The bytes a corrupt or cut frame must have to show the unit and kind it answers.
+    header_bytes: int
     #: Whether frames name the unit that sent them (AP ASCII's do not).
     names_units: bool
 

@@ -149,6 +149,7 @@ class ReplyFramer:
     """
 
     max_bytes = MAX_ADU_BYTES
+    header_bytes = 2  # unit and function: what a cut answer must show to be its own
     names_units = True
 
     @staticmethod

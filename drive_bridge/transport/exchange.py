@@ -38,7 +38,7 @@ bytes and say whether a frame answers their request; the :class:`ByteLine` moves
 import time
 from typing import Any, Callable, Dict, List, Optional, Protocol
 
-from drive_bridge.errors import LineBabble, TransportError
+from drive_bridge.errors import AmbiguousReply, LineBabble, TransportError
 from drive_bridge.protocol.framing import Frame, Framer, frames_in
 from drive_bridge.transport.base import LineTiming, TransactionReport
 from drive_bridge.transport.reply_window import Accept, ReplyWindow, Shaped
@@ -137,6 +137,8 @@ class LineDiscipline:
         try:
             if self.timing.echo:
                 window.read_echo(request, deadline)
+                if self._names_unit(window.late):  # came before the request: the held one
+                    owed = None
             return window.read(self._unit, accept, len(request), deadline, owed, shaped,
                                acknowledges)
         finally:
@@ -173,9 +175,19 @@ class LineDiscipline:
         self.quarantine(max(now, self._deadline), now)
 
     def done(self) -> None:
-        """End a transaction that got its answer; quarantine if it saw a late frame."""
+        """
+        End a transaction that got its answer; quarantine if it saw a late frame.
+
+        A frame of the unit that comes in that quarantine makes the answer ambiguous (it may
+        have been a late one after all): AmbiguousReply, and the unit owes its answer.
+        """
         if self._window_discards:
+            seen = len(self.report.late)
             self.quarantine(self.clock())
+            if self._names_unit(self.report.late[seen:]):
+                self.owed[self.key(self._unit)] = self._accept
+                raise AmbiguousReply('a second frame of the unit came after its answer, in the '
+                                     'quarantine: the answer is not provably its own')
         if self._answer_s:
             self.report.after_answer_s = self.clock() - self._answer_s
 
@@ -241,7 +253,19 @@ class LineDiscipline:
         self._count(frames)
         self.report.noise_bytes += noise
 
+    def _names_unit(self, frames: List[Frame]) -> bool:
+        """Return whether any of ``frames`` may be one of the transaction's unit."""
+        key = self.key(self._unit)
+        return any(self.key(frame.unit) == key for frame in frames)
+
     def _count(self, frames: List[Frame]) -> None:
+        """
+        Count ``frames`` as late; each settles what the unit it names owes.
+
+        A frame that names no unit (AP ASCII: one byte, which noise can make too) settles
+        nothing: only a window of the line that gets its reply does.
+        """
         for frame in frames:
             self.report.late.append(frame)
-            self.owed.pop(self.key(frame.unit), None)
+            if frame.unit is not None:
+                self.owed.pop(frame.unit, None)

@@ -49,7 +49,7 @@ class ReplyWindow:
         self.late: List[Frame] = []  # whole frames that were not the answer
         self.unread = b''  # bytes read and not taken (the quarantine counts them)
         self.unit_seen = False  # a whole valid frame of the unit came
-        self.answered_badly = False  # a corrupt or cut frame with the answer's shape came
+        self.answered_badly = False  # a corrupt or cut frame that shows the answer's unit came
         self.quiet_s = 0.0  # the silence kept after the last byte before returning
         self.answer_s = 0.0  # when the last byte of the answer came (the clock's time)
         self._last_byte_s = 0.0
@@ -144,9 +144,19 @@ class ReplyWindow:
         if not frame.valid:
             self.unread = frame.raw
             answer_like = self._shaped is None or self._shaped(frame)
-            self.answered_badly = answer_like
+            self.answered_badly = self._shows_answer(frame)
             error_type = CrcError if frame.kind == 'crc' and answer_like else BadFrame
             raise error_type(f'invalid reply ({frame.error}), {len(frame.raw)} bytes received')
+
+    def _shows_answer(self, frame: Frame) -> bool:
+        """
+        Return whether a corrupt or cut frame shows the unit and kind of the answer.
+
+        Only then does it tell that the unit answered (noise spoiled it): a stray byte, or a
+        frame of a protocol whose frames name no unit, tells nothing of whose it is.
+        """
+        return self.framer.names_units and self._shaped is not None and \
+            len(frame.raw) >= self.framer.header_bytes and self._shaped(frame)
 
     def _answer(self, frame: Frame, accept: Accept, sent_s: float, request_bytes: int,
                 owed: Optional[Accept]) -> Any:
@@ -192,7 +202,7 @@ class ReplyWindow:
                 raise BadFrame(f'invalid reply ({_shown(buffer)}: cut short, and not the unit '
                                f'and function of the answer), {len(buffer)} bytes received')
             needed = self.framer.cut(buffer).needed
-            self.answered_badly = True
+            self.answered_badly = self._shows_answer(Frame(bytes(buffer)))
             raise TruncatedFrame(f'truncated reply: {_part(buffer, needed)} within '
                                  f'{self.timing.timeout_s:g} s')
         if answer is not _NOTHING:

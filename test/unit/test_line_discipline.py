@@ -510,3 +510,81 @@ def test_on_rtu_over_tcp_bytes_right_behind_a_reply_are_one_corrupt_frame_too():
     assert transport.discipline.timing.gap_s > 0.001
     with pytest.raises(BadFrame, match='inter-frame silence'):
         transport.execute(20, READ)
+
+
+# -- a second adversarial review --------------------------------------------------------------
+@pytest.mark.parametrize('glitch', [b'\x14', b'\x55', b'\xf7'])
+def test_a_lone_glitch_byte_does_not_settle_a_reply_held_by_a_gateway(glitch):
+    """One byte shows no unit or function: the answer may still be held; it owes."""
+    held, second = registers(20, [1010, 1011, 1012]), registers(20, [1050, 1051, 1052])
+    transport, line, clock = rtu_line([(0.002, glitch)], [(0.0, held), (0.01, second)])
+    with pytest.raises(TruncatedFrame):
+        transport.execute(20, READ)
+    assert 20 in transport.discipline.owed
+    with pytest.raises(AmbiguousReply):
+        transport.execute(20, ReadRegisters(50, 3))
+
+
+def test_a_cut_answer_that_shows_its_unit_and_function_leaves_no_debt():
+    transport, line, clock = rtu_line([(TURNAROUND_S, OURS[:4])])
+    with pytest.raises(TruncatedFrame):
+        transport.execute(20, READ)
+    assert 20 not in transport.discipline.owed
+
+
+def test_a_lone_stx_does_not_settle_an_fc_reply_held_by_a_gateway():
+    start_reply = fc_reply(0x0F07, 0x2000)
+    transport, line, clock = fc_line([(0.002, b'\x02')], [(0.0, start_reply)])
+    with pytest.raises(TruncatedFrame):
+        transport.execute(1, fc.process_request(0x047F, 0x2000))
+    with pytest.raises(AmbiguousReply):  # the stop, never answered, gets the held reply
+        transport.execute(1, fc.process_request(0x043C, 0x2000))
+
+
+@pytest.mark.parametrize('noise', [b'\x02', b'\x00\x00\x07\x00'])
+def test_ap_ascii_noise_does_not_settle_the_line_s_debt(noise):
+    """A stray STX, or a BEL-valued byte in the quarantine, is no answer of anybody's."""
+    held = []
+
+    def device(request, now):
+        if request == ap_ascii.message_fragment('B10'):
+            held.append(ACK)
+            return [(0.002, noise)]
+        if request == ap_ascii.message_fragment('B12'):
+            return []
+        released = [(0.0, held.pop())] if held else []
+        return released + [(0.01, ACK)]
+    settings = LinkSettings(protocol='ap_ascii', port='/dev/ttyTEST', timeout_s=0.5)
+    transport, line, clock = scripted(ApAsciiTransport, settings)
+    line.device = device
+    with pytest.raises(BadFrame):
+        transport.execute(20, AsciiCommand('B10'))
+    with pytest.raises(AmbiguousReply):
+        transport.execute(20, AsciiCommand('B12'))
+
+
+def test_a_second_frame_of_the_unit_after_its_answer_makes_the_answer_ambiguous():
+    """Seen in the quarantine that another unit's frame in the window brought about."""
+    other, held = registers(21, [9, 9, 9]), registers(20, [1010, 1011, 1012])
+    transport, line, clock = rtu_line(
+        [(0.0, other), (0.002, held), (0.02, registers(20, [1050, 1051, 1052]))])
+    with pytest.raises(AmbiguousReply, match='second frame of the unit'):
+        transport.execute(20, ReadRegisters(50, 3))
+    assert 20 in transport.discipline.owed
+
+
+def test_a_held_acknowledgement_ahead_of_the_echo_came_before_the_request():
+    """It settles the debt: the acknowledgement after the echo is the write's own."""
+    stop = WriteCoils(0, words_to_coils([0x043C, 0x2000]))
+    ack = rtu.RtuFrame(20, rtu.WRITE_MULTIPLE_COILS, bytes([0, 0, 0, 32])).encode()
+
+    def device(request, now):
+        if not line.writes[:-1]:  # the first stop: echoed, its acknowledgement held
+            return [(0.0, request)]
+        return [(0.0, ack), (0.0, request), (0.01, ack)]  # held, the echo, its own
+    settings = LinkSettings(**{**SETTINGS.__dict__, 'local_echo': True})
+    transport, line, clock = scripted(RtuSerialTransport, settings)
+    line.device = device
+    with pytest.raises(NoResponse):
+        transport.execute(20, stop)
+    assert transport.execute(20, stop) is None
