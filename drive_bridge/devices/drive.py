@@ -17,8 +17,8 @@ from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequ
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Freshness,
-    ParameterAccess, ParameterOptions, ParameterPlan, PollCycle, PollStep, SetupWrites,
-    SlowReadouts, SpeedReference, TRIP_CODE_UNKNOWN)
+    ParameterAccess, ParameterOptions, ParameterPlan, PollCycle, PollShape, PollStep,
+    SetupWrites, SlowReadouts, SpeedReference, TRIP_CODE_UNKNOWN)
 from drive_bridge.devices.parameters import (
     decode_value, encode_value, parameter_address, ParameterSpec, TEXT)
 from drive_bridge.errors import (
@@ -420,6 +420,16 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
             registers = yield PollStep(self._read(spec))
             self.take_readout(name, decode_value(spec, registers, self.data.conversion_factors))
         return self.reading(status_word, actual_word, control)
+
+    def poll_shape(self) -> PollShape:
+        """
+        Keepalive, status coils, current, a slow readout, alarm and warning word at once.
+
+        Each time it comes online: the identity reads and the set-up writes.
+        """
+        identity = sum(1 for number in (self.data.identify_parameter,
+                                        self.data.version_parameter) if number is not None)
+        return PollShape(transactions=6, writes=1, online=identity + len(self.setup_plan()))
 
     def _identity_value(self, key: str, result: object) -> object:
         if not isinstance(result, list):

@@ -24,7 +24,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, ParameterAccess, ParameterOptions, ParameterPlan, PollCycle,
-    PollStep, SlowReadouts)
+    PollShape, PollStep, SlowReadouts)
 from drive_bridge.devices.drive import (
     ALWAYS_READ, control_word_for, DriveFamilyData, FcProfileDrive)
 from drive_bridge.devices.parameters import (
@@ -83,6 +83,12 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
         status = StatusWord(reply.pcd1)
         self._follow_up = self.take_status(status, [name])
         return self.reading(reply.pcd1, reply.pcd2, control)
+
+    def poll_shape(self) -> PollShape:
+        """One telegram a poll; the identity reads and set-up writes each time it comes back."""
+        identity = sum(1 for number in (self.data.identify_parameter,
+                                        self.data.version_parameter) if number is not None)
+        return PollShape(transactions=1, online=identity + len(self.setup_plan()))
 
     def _next_readout(self, now_s: float) -> str:
         """Return the readout whose turn it is: follow-ups, then current and slow ones."""
