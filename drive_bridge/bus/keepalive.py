@@ -103,7 +103,8 @@ def keepalive_gap(name: str, devices: Sequence[PollLoad], times: LineTimes) -> K
     own_poll_s = own.transactions * times.answered_s + lost_reads * times.failed_s
     parts: List[Tuple[str, float]] = []
     if own_poll_s > own.poll_period_s:
-        parts.append((f'its own poll with {lost_reads} lost reads', own_poll_s))
+        lost = f' with {lost_reads} lost reads' if lost_reads else ''
+        parts.append((f'its own poll{lost}', own_poll_s))
     else:
         parts.append(('its poll period', own.poll_period_s))
     for other in devices:

@@ -387,6 +387,10 @@ class SetupWrites(ABC):
     def setup_plan(self) -> Sequence[Request]:
         """Return the set-up writes (may be empty)."""
 
+    def setup_labels(self) -> Sequence[str]:
+        """Return what each set-up write sets, in words (``par. 8-03 ... = 5.5 s``)."""
+        return [request.describe() for request in self.setup_plan()]
+
 
 @dataclass(frozen=True)
 class Family:

@@ -325,6 +325,16 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
             reading.warnings.append('local operation: the drive ignores bus commands')
         reading.details = details
 
+    def timeout_parameters(self) -> List[Tuple[int, float]]:
+        """Return the set-up writes as (parameter number, value): FC 8-03 and 8-04."""
+        data = self.data
+        writes: List[Tuple[int, float]] = []
+        if self.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
+            writes.append((data.timeout_time_parameter, self.comms_timeout_s))
+        if self.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
+            writes.append((data.timeout_function_parameter, self.comms_timeout_function))
+        return writes
+
     def describe_control(self, control: ControlView) -> str:
         """Return the control word the keepalive writes, in words."""
         word = control_word_for(control.steady)
@@ -453,19 +463,27 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
     # -- set-up writes ------------------------------------------------------------------
     def setup_plan(self) -> List[Request]:
         """Return the writes that configure the drive's own comms timeout (none by default)."""
+        return [request for _, request in self._setup_writes()]
+
+    def setup_labels(self) -> List[str]:
+        """Return each set-up write by parameter or register: ``par. 8-03 ... = 5.5``."""
+        return [label for label, _ in self._setup_writes()]
+
+    def _setup_writes(self) -> List[Tuple[str, Request]]:
         data = self.data
-        writes: List[Request] = []
-        if self.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
-            spec = data.spec(data.timeout_time_parameter)
-            writes.append(self._write(spec, encode_value(spec, self.comms_timeout_s,
-                                                         data.conversion_factors)))
-        if self.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
-            spec = data.spec(data.timeout_function_parameter)
-            writes.append(self._write(spec, [self.comms_timeout_function]))
-        for register, seconds in ((data.timeout_register, self.comms_timeout_s),
-                                  (data.drive_link_timeout_register, self.drive_link_timeout_s)):
+        writes: List[Tuple[str, Request]] = []
+        for number, value in self.timeout_parameters():
+            spec = data.spec(number)
+            registers = encode_value(spec, value, data.conversion_factors) \
+                if number == data.timeout_time_parameter else [value]
+            writes.append((f'{spec.name} = {value:g}', self._write(spec, registers)))
+        for register, seconds, name in (
+                (data.timeout_register, self.comms_timeout_s, 'Modbus communications timeout'),
+                (data.drive_link_timeout_register, self.drive_link_timeout_s,
+                 'drive communications timeout')):
             if register is not None and seconds > 0:
-                writes.append(WriteRegister(register, round(seconds * 100)))  # 10 ms units
+                writes.append((f'option card register {register + 1} ({name}) = {seconds:g} s',
+                               WriteRegister(register, round(seconds * 100))))  # 10 ms units
         return writes
 
     @staticmethod

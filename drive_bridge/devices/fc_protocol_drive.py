@@ -141,15 +141,13 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
     # -- set-up writes ------------------------------------------------------------------
     def setup_plan(self) -> List[Request]:
         """Return the writes of the drive's own control word timeout (FC: 8-03, 8-04)."""
-        data = self.data
-        writes: List[Request] = []
-        if self.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
-            writes.append(self._write_request(data.spec(data.timeout_time_parameter),
-                                              self.comms_timeout_s))
-        if self.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
-            writes.append(self._write_request(data.spec(data.timeout_function_parameter),
-                                              self.comms_timeout_function))
-        return writes
+        return [self._write_request(self.data.spec(number), value)
+                for number, value in self.timeout_parameters()]
+
+    def setup_labels(self) -> List[str]:
+        """Return each set-up write by parameter: ``... (par. 8-03) = 5.5``."""
+        return [f'{self.data.spec(number).name} = {value:g}'
+                for number, value in self.timeout_parameters()]
 
     # -- parameters ---------------------------------------------------------------------
     def parameter_plan(self, number: int, value: Any = None,
