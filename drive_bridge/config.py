@@ -289,13 +289,13 @@ def check_comms_timeouts(config: BridgeConfig) -> None:
         device = config.device(name)
         timeout_s = device.option('comms_timeout')
         if timeout_s < gap.gap_s:
+            times = line_times(config.link, config.timing).describe()
             raise ConfigError(
                 f'{name}.comms_timeout {timeout_s:g} s is below {gap.gap_s:.2f} s, the longest '
                 f'the bus may go without writing to {name} (address {device.address}) while '
-                f'the line works: {gap.explain()} ({line_times(config.link, config.timing).describe()}):'
-                f' set comms_timeout to at least {gap.advised_s:g} s (a margin of 1 s), or '
-                'raise poll_rate, lower timeout or retries, or lower the other devices\' '
-                'poll_rate')
+                f'the line works: {gap.explain()} ({times}): set comms_timeout to at least '
+                f'{gap.advised_s:g} s (a margin of 1 s), or raise poll_rate, lower timeout or '
+                "retries, or lower the other devices' poll_rate")
 
 
 def check_bus_keys(bus_values: Mapping[str, Any]) -> None:

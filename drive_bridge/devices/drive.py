@@ -107,6 +107,17 @@ class DriveFamilyData:
         return sorted(number for number, spec in self.table(model).items() if spec.setting)
 
 
+def timeout_parameters(drive: 'FcProfileDrive') -> List[Tuple[int, float]]:
+    """Return a drive's set-up writes as (parameter number, value): FC 8-03 and 8-04."""
+    data = drive.data
+    writes: List[Tuple[int, float]] = []
+    if drive.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
+        writes.append((data.timeout_time_parameter, drive.comms_timeout_s))
+    if drive.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
+        writes.append((data.timeout_function_parameter, drive.comms_timeout_function))
+    return writes
+
+
 def control_word_for(steady: Optional[Command]) -> Optional[int]:
     """Return the FC-profile control word that carries ``steady`` (None: write nothing)."""
     if steady is None:
@@ -325,16 +336,6 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
             reading.warnings.append('local operation: the drive ignores bus commands')
         reading.details = details
 
-    def timeout_parameters(self) -> List[Tuple[int, float]]:
-        """Return the set-up writes as (parameter number, value): FC 8-03 and 8-04."""
-        data = self.data
-        writes: List[Tuple[int, float]] = []
-        if self.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
-            writes.append((data.timeout_time_parameter, self.comms_timeout_s))
-        if self.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
-            writes.append((data.timeout_function_parameter, self.comms_timeout_function))
-        return writes
-
     def describe_control(self, control: ControlView) -> str:
         """Return the control word the keepalive writes, in words."""
         word = control_word_for(control.steady)
@@ -472,7 +473,7 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
     def _setup_writes(self) -> List[Tuple[str, Request]]:
         data = self.data
         writes: List[Tuple[str, Request]] = []
-        for number, value in self.timeout_parameters():
+        for number, value in timeout_parameters(self):
             spec = data.spec(number)
             registers = encode_value(spec, value, data.conversion_factors) \
                 if number == data.timeout_time_parameter else [value]

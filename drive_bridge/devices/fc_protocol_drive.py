@@ -26,7 +26,7 @@ from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, ParameterAccess, ParameterOptions, ParameterPlan, PollCycle,
     PollShape, PollStep, SlowReadouts)
 from drive_bridge.devices.drive import (
-    ALWAYS_READ, control_word_for, DriveFamilyData, FcProfileDrive)
+    ALWAYS_READ, control_word_for, DriveFamilyData, FcProfileDrive, timeout_parameters)
 from drive_bridge.devices.parameters import (
     DATA_TYPES, decode_value, encode_value, ParameterSpec, TEXT)
 from drive_bridge.errors import CommandRefused, ConfigError, DeviceException, ProtocolError
@@ -142,12 +142,12 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
     def setup_plan(self) -> List[Request]:
         """Return the writes of the drive's own control word timeout (FC: 8-03, 8-04)."""
         return [self._write_request(self.data.spec(number), value)
-                for number, value in self.timeout_parameters()]
+                for number, value in timeout_parameters(self)]
 
     def setup_labels(self) -> List[str]:
         """Return each set-up write by parameter: ``... (par. 8-03) = 5.5``."""
         return [f'{self.data.spec(number).name} = {value:g}'
-                for number, value in self.timeout_parameters()]
+                for number, value in timeout_parameters(self)]
 
     # -- parameters ---------------------------------------------------------------------
     def parameter_plan(self, number: int, value: Any = None,

@@ -280,7 +280,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         return WriteRegisters(self.output_register, tuple(registers))
 
     def poll_shape(self) -> PollShape:
-        """The image (or request) write, the input read, Fwd Run cleared; the read-back."""
+        """Return the image (or request) write, the input read, Fwd Run cleared; read-back."""
         return PollShape(transactions=3, writes=1, online=1)
 
     def describe_control(self, control: ControlView) -> str:
