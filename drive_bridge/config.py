@@ -15,12 +15,14 @@ import sys
 from typing import (
     Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Set, Tuple, Union)
 
+from drive_bridge.bus.keepalive import keepalive_gap, KeepaliveGap, LineTimes, PollLoad
 from drive_bridge.bus.master import BusTiming, DeviceSpec
 from drive_bridge.devices.contracts import Family
 from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.errors import ConfigError
 from drive_bridge.settings import check_value, Setting
 from drive_bridge.transport.engines import make_transport
+from drive_bridge.transport.line_transport import line_timing
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.protocols import protocol_settings, PROTOCOLS
 
@@ -251,7 +253,49 @@ def build_config(bus_values: Mapping[str, Any],
                        command_deadline_s=bus['command_deadline'],
                        transaction_timeout_s=bus['timeout'],
                        slow_reply_s=bus['timeout'] / 2)
-    return BridgeConfig(link, timing, devices, bus['diagnostics_period'], options)
+    config = BridgeConfig(link, timing, devices, bus['diagnostics_period'], options)
+    check_comms_timeouts(config)
+    return config
+
+
+# -- the keepalive rule: a drive's comms_timeout against the line's schedule --------------
+def line_times(link: LinkSettings, timing: BusTiming) -> LineTimes:
+    """Return how long one answered and one failed transaction keep the line busy."""
+    line = line_timing(link, paced=False)
+    spec = PROTOCOLS[link.protocol]
+    gap_s = timing.frame_gap_s
+    answered_s = spec.poll_frame_chars * line.char_s + 2 * max(gap_s, line.gap_s) + \
+        spec.reply_delay_s
+    failed_s = line.timeout_s + line.guard_s + line.quarantine_silence_s + gap_s
+    return LineTimes(answered_s, failed_s, timing.retries, timing.offline_after,
+                     timing.backoff_initial_s)
+
+
+def keepalive_gaps(config: BridgeConfig) -> Dict[str, KeepaliveGap]:
+    """Return, per drive with a ``comms_timeout``, the longest gap between two of its polls."""
+    loads = []
+    for device in config.devices:
+        shape = device.make_spec().profile.poll_shape()
+        loads.append(PollLoad(device.name, 1.0 / device.poll_rate, shape.transactions,
+                              shape.writes, shape.online))
+    times = line_times(config.link, config.timing)
+    return {device.name: keepalive_gap(device.name, loads, times) for device in config.devices
+            if device.option('comms_timeout', 0.0) > 0}
+
+
+def check_comms_timeouts(config: BridgeConfig) -> None:
+    """Refuse a drive's ``comms_timeout`` shorter than the longest gap between its polls."""
+    for name, gap in keepalive_gaps(config).items():
+        device = config.device(name)
+        timeout_s = device.option('comms_timeout')
+        if timeout_s < gap.gap_s:
+            times = line_times(config.link, config.timing).describe()
+            raise ConfigError(
+                f'{name}.comms_timeout {timeout_s:g} s is below {gap.gap_s:.2f} s, the longest '
+                f'the bus may go without writing to {name} (address {device.address}) while '
+                f'the line works: {gap.explain()} ({times}): set comms_timeout to at least '
+                f'{gap.advised_s:g} s (a margin of 1 s), or raise poll_rate, lower timeout or '
+                "retries, or lower the other devices' poll_rate")
 
 
 def check_bus_keys(bus_values: Mapping[str, Any]) -> None:

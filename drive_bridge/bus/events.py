@@ -34,6 +34,7 @@ class DeviceOnline(BusEvent):
     """The device answers again (or for the first time); a ReadingEvent follows."""
 
     reading: DeviceReading
+    address: int = 0  # the device's bus address, for messages (0: not given)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -41,6 +42,7 @@ class DeviceOffline(BusEvent):
     """The device stopped answering, or the link was lost; its values are gone."""
 
     message: str
+    address: int = 0  # the device's bus address, for messages (0: not given)
 
 
 @dataclass(frozen=True, kw_only=True)

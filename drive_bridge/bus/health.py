@@ -111,7 +111,7 @@ class HealthKeeper:
                            self.clock(), first=True)
             if not was_offline:
                 self.events.emit(DeviceOffline(device=device.name, stamp_s=self.clock(),
-                                               message=reason))
+                                               message=reason, address=device.spec.unit))
 
     def mark_all_offline(self, reason: str) -> None:
         """Take every device offline (the link was lost)."""
@@ -143,7 +143,7 @@ class HealthKeeper:
             notices.append(device.owner.on_reading(reading, started_s))
             if came_online:
                 self.events.emit(DeviceOnline(device=device.name, stamp_s=received_s,
-                                              reading=reading))
+                                              reading=reading, address=device.spec.unit))
             self.events.emit(ReadingEvent(device=device.name, stamp_s=received_s,
                                           reading=reading))
             for notice in notices:

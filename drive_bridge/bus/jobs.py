@@ -73,6 +73,7 @@ class SetupJob(Job):
     """The set-up writes of a device that came online."""
 
     writes: Tuple[Request, ...] = ()
+    labels: Tuple[str, ...] = ()  # what each write sets, in words (par. 8-03 ... = 5.5)
 
     def describe(self) -> str:
         """Return the job in words."""
@@ -199,5 +200,6 @@ def setup_job(device: BusDevice) -> Optional[SetupJob]:
     if isinstance(device.profile, SetupWrites) and device.owner.writes_allowed:
         writes = tuple(device.profile.setup_plan())
         if writes:
-            return SetupJob(device, math.inf, Future(), writes)
+            return SetupJob(device, math.inf, Future(), writes,
+                            tuple(device.profile.setup_labels()))
     return None

@@ -41,6 +41,7 @@ class DeviceSnapshot:
     reading_fields: FrozenSet[str] = frozenset()
     control: str = ''
     hardware: Dict[str, str] = field(default_factory=dict)
+    poll_period_s: float = 0.0  # the time between two polls at the configured poll_rate
 
 
 class DeviceTable:
@@ -120,7 +121,7 @@ class DeviceTable:
                 motion=owner.motion, holds_run=owner.holds_run,
                 allow_control=owner.allow_control, commands=profile.commands,
                 reading_fields=profile.reading_fields,
-                control=profile.describe_control(owner))
+                control=profile.describe_control(owner), poll_period_s=device.poll_period_s)
 
 
 def _device_stats(device: BusDevice) -> Dict[str, str]:

@@ -71,25 +71,26 @@ class JobRunner:
     def _run_setup(self, job: SetupJob) -> None:
         """Send the set-up writes (drives: their comms timeout) each time a device is back."""
         device = job.device
-        for write in job.writes:
+        labels = job.labels or tuple(write.describe() for write in job.writes)
+        for write, label in zip(job.writes, labels):
             try:
                 self.runner.transact(device, write)
             except LinkDown as error:
                 self.link.lost(str(error))
                 return
             except (TransportError, MonitorOnly) as error:
-                self._setup_failed(job, write, error)
+                self._setup_failed(job, label, error)
                 return
         with self.devices.locked():
             device.setup_error = ''
 
-    def _setup_failed(self, job: SetupJob, write, error: Exception) -> None:
+    def _setup_failed(self, job: SetupJob, label: str, error: Exception) -> None:
         device = job.device
         text = self.runner.explain(device, error) \
             if isinstance(error, TransportError) else str(error)
         lost = isinstance(error, TransportError) and not isinstance(error, DeviceException)
         with self.devices.locked():
-            device.setup_error = f'set-up write {write.describe()} failed: {text}' + \
+            device.setup_error = f'set-up write {label} failed: {text}' + \
                 ('; it is sent again' if lost else '')
             if lost:  # a lost reply, not a refusal: try again after a pause
                 device.setup_retry_at_s = self.clock() + SETUP_RETRY_S

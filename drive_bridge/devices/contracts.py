@@ -105,6 +105,22 @@ PollCycle = Generator[PollStep, Any, DeviceReading]
 
 
 @dataclass(frozen=True)
+class PollShape:
+    """
+    The most a poll cycle puts on the line, once the device is identified.
+
+    ``transactions``: the most one poll takes (every readout due, a trip and a warning
+    read at once); ``writes``: the writes before its first read (a probe of a silent
+    device sends them too); ``online``: the transactions each time it comes online
+    (identity reads, set-up writes).
+    """
+
+    transactions: int = 1
+    writes: int = 0
+    online: int = 0
+
+
+@dataclass(frozen=True)
 class CommandPlan:
     """The writes that carry out one command, in order (sent as one job)."""
 
@@ -325,6 +341,10 @@ class DeviceProfile(ABC):
         """Return what the cyclic image carries, in words, for /diagnostics."""
         return 'none'
 
+    def poll_shape(self) -> PollShape:
+        """Return the most a poll of this device puts on the line (the keepalive rule)."""
+        return PollShape()
+
 
 class CyclicControl(ABC):
     """
@@ -366,6 +386,10 @@ class SetupWrites(ABC):
     @abstractmethod
     def setup_plan(self) -> Sequence[Request]:
         """Return the set-up writes (may be empty)."""
+
+    def setup_labels(self) -> Sequence[str]:
+        """Return what each set-up write sets, in words (``par. 8-03 ... = 5.5 s``)."""
+        return [request.describe() for request in self.setup_plan()]
 
 
 @dataclass(frozen=True)

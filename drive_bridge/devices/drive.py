@@ -17,8 +17,8 @@ from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequ
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Freshness,
-    ParameterAccess, ParameterOptions, ParameterPlan, PollCycle, PollStep, SetupWrites,
-    SlowReadouts, SpeedReference, TRIP_CODE_UNKNOWN)
+    ParameterAccess, ParameterOptions, ParameterPlan, PollCycle, PollShape, PollStep,
+    SetupWrites, SlowReadouts, SpeedReference, TRIP_CODE_UNKNOWN)
 from drive_bridge.devices.parameters import (
     decode_value, encode_value, parameter_address, ParameterSpec, TEXT)
 from drive_bridge.errors import (
@@ -105,6 +105,17 @@ class DriveFamilyData:
     def settings(self, model: Optional[str] = None) -> List[int]:
         """Return the numbers of the settings a backup saves (readouts excluded)."""
         return sorted(number for number, spec in self.table(model).items() if spec.setting)
+
+
+def timeout_parameters(drive: 'FcProfileDrive') -> List[Tuple[int, float]]:
+    """Return a drive's set-up writes as (parameter number, value): FC 8-03 and 8-04."""
+    data = drive.data
+    writes: List[Tuple[int, float]] = []
+    if drive.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
+        writes.append((data.timeout_time_parameter, drive.comms_timeout_s))
+    if drive.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
+        writes.append((data.timeout_function_parameter, drive.comms_timeout_function))
+    return writes
 
 
 def control_word_for(steady: Optional[Command]) -> Optional[int]:
@@ -421,6 +432,16 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
             self.take_readout(name, decode_value(spec, registers, self.data.conversion_factors))
         return self.reading(status_word, actual_word, control)
 
+    def poll_shape(self) -> PollShape:
+        """
+        Keepalive, status coils, current, a slow readout, alarm and warning word at once.
+
+        Each time it comes online: the identity reads and the set-up writes.
+        """
+        identity = sum(1 for number in (self.data.identify_parameter,
+                                        self.data.version_parameter) if number is not None)
+        return PollShape(transactions=6, writes=1, online=identity + len(self.setup_plan()))
+
     def _identity_value(self, key: str, result: object) -> object:
         if not isinstance(result, list):
             return result
@@ -443,19 +464,27 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
     # -- set-up writes ------------------------------------------------------------------
     def setup_plan(self) -> List[Request]:
         """Return the writes that configure the drive's own comms timeout (none by default)."""
+        return [request for _, request in self._setup_writes()]
+
+    def setup_labels(self) -> List[str]:
+        """Return each set-up write by parameter or register: ``par. 8-03 ... = 5.5``."""
+        return [label for label, _ in self._setup_writes()]
+
+    def _setup_writes(self) -> List[Tuple[str, Request]]:
         data = self.data
-        writes: List[Request] = []
-        if self.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
-            spec = data.spec(data.timeout_time_parameter)
-            writes.append(self._write(spec, encode_value(spec, self.comms_timeout_s,
-                                                         data.conversion_factors)))
-        if self.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
-            spec = data.spec(data.timeout_function_parameter)
-            writes.append(self._write(spec, [self.comms_timeout_function]))
-        for register, seconds in ((data.timeout_register, self.comms_timeout_s),
-                                  (data.drive_link_timeout_register, self.drive_link_timeout_s)):
+        writes: List[Tuple[str, Request]] = []
+        for number, value in timeout_parameters(self):
+            spec = data.spec(number)
+            registers = encode_value(spec, value, data.conversion_factors) \
+                if number == data.timeout_time_parameter else [value]
+            writes.append((f'{spec.name} = {value:g}', self._write(spec, registers)))
+        for register, seconds, name in (
+                (data.timeout_register, self.comms_timeout_s, 'Modbus communications timeout'),
+                (data.drive_link_timeout_register, self.drive_link_timeout_s,
+                 'drive communications timeout')):
             if register is not None and seconds > 0:
-                writes.append(WriteRegister(register, round(seconds * 100)))  # 10 ms units
+                writes.append((f'option card register {register + 1} ({name}) = {seconds:g} s',
+                               WriteRegister(register, round(seconds * 100))))  # 10 ms units
         return writes
 
     @staticmethod

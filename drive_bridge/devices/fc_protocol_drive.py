@@ -24,9 +24,9 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, ParameterAccess, ParameterOptions, ParameterPlan, PollCycle,
-    PollStep, SlowReadouts)
+    PollShape, PollStep, SlowReadouts)
 from drive_bridge.devices.drive import (
-    ALWAYS_READ, control_word_for, DriveFamilyData, FcProfileDrive)
+    ALWAYS_READ, control_word_for, DriveFamilyData, FcProfileDrive, timeout_parameters)
 from drive_bridge.devices.parameters import (
     DATA_TYPES, decode_value, encode_value, ParameterSpec, TEXT)
 from drive_bridge.errors import CommandRefused, ConfigError, DeviceException, ProtocolError
@@ -84,6 +84,12 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
         self._follow_up = self.take_status(status, [name])
         return self.reading(reply.pcd1, reply.pcd2, control)
 
+    def poll_shape(self) -> PollShape:
+        """One telegram a poll; the identity reads and set-up writes each time it comes back."""
+        identity = sum(1 for number in (self.data.identify_parameter,
+                                        self.data.version_parameter) if number is not None)
+        return PollShape(transactions=1, online=identity + len(self.setup_plan()))
+
     def _next_readout(self, now_s: float) -> str:
         """Return the readout whose turn it is: follow-ups, then current and slow ones."""
         if self._follow_up:
@@ -135,15 +141,13 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
     # -- set-up writes ------------------------------------------------------------------
     def setup_plan(self) -> List[Request]:
         """Return the writes of the drive's own control word timeout (FC: 8-03, 8-04)."""
-        data = self.data
-        writes: List[Request] = []
-        if self.comms_timeout_s > 0 and data.timeout_time_parameter is not None:
-            writes.append(self._write_request(data.spec(data.timeout_time_parameter),
-                                              self.comms_timeout_s))
-        if self.comms_timeout_function >= 0 and data.timeout_function_parameter is not None:
-            writes.append(self._write_request(data.spec(data.timeout_function_parameter),
-                                              self.comms_timeout_function))
-        return writes
+        return [self._write_request(self.data.spec(number), value)
+                for number, value in timeout_parameters(self)]
+
+    def setup_labels(self) -> List[str]:
+        """Return each set-up write by parameter: ``... (par. 8-03) = 5.5``."""
+        return [f'{self.data.spec(number).name} = {value:g}'
+                for number, value in timeout_parameters(self)]
 
     # -- parameters ---------------------------------------------------------------------
     def parameter_plan(self, number: int, value: Any = None,

@@ -19,7 +19,7 @@ from typing import Any, Dict, FrozenSet, Mapping, Optional
 
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Family, Freshness,
-    PollCycle, PollStep, SlowReadouts, TRIP_CODE_UNKNOWN)
+    PollCycle, PollShape, PollStep, SlowReadouts, TRIP_CODE_UNKNOWN)
 from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
 from drive_bridge.protocol import lvsg
 from drive_bridge.protocol.commands import Command
@@ -278,6 +278,10 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         if len(registers) == 1:
             return WriteRegister(self.output_register, registers[0])
         return WriteRegisters(self.output_register, tuple(registers))
+
+    def poll_shape(self) -> PollShape:
+        """Return the image (or request) write, the input read, Fwd Run cleared; read-back."""
+        return PollShape(transactions=3, writes=1, online=1)
 
     def describe_control(self, control: ControlView) -> str:
         """Return the control bits the gateway holds, in words."""

@@ -11,7 +11,7 @@ from typing import Any, Dict, Optional, Sequence
 from drive_bridge.devices import mcd
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, DeviceReading, ParameterOptions, ParameterPlan, PollCycle,
-    PollStep)
+    PollShape, PollStep)
 from drive_bridge.errors import CommandRefused, ProtocolError
 from drive_bridge.protocol import ap_ascii
 from drive_bridge.protocol.commands import Command
@@ -35,6 +35,10 @@ class McdAsciiProfile(mcd.McdProfile):
     """Requests, decode and commands of one MCD starter on AP ASCII."""
 
     commands = frozenset(ap_ascii.COMMANDS)
+
+    def poll_shape(self) -> PollShape:
+        """Status, trip code, current and temperature: one exchange each."""
+        return PollShape(transactions=4)
 
     def poll(self, control: ControlView, now_s: float) -> PollCycle:
         """

@@ -5,13 +5,18 @@ from drive_bridge.bus.events import (
 from drive_bridge.ros.publishers import DevicePublishers
 
 
+def named(device: str, address: int) -> str:
+    """Return a device with its bus address: ``fc1 (address 2)``."""
+    return f'{device} (address {address})' if address else device
+
+
 def _reading(publishers: DevicePublishers, logger, event: ReadingEvent) -> None:
     publishers.publish_reading(event.reading)
 
 
 def _offline(publishers: DevicePublishers, logger, event: DeviceOffline) -> None:
     publishers.publish_state('offline')
-    logger.error(f'{event.device} offline: {event.message}')
+    logger.error(f'{named(event.device, event.address)} offline: {event.message}')
 
 
 def _unknown(publishers: DevicePublishers, logger, event: StateUnknown) -> None:
@@ -24,7 +29,7 @@ def _notice(publishers: DevicePublishers, logger, event: Notice) -> None:
 
 
 def _online(publishers: DevicePublishers, logger, event: DeviceOnline) -> None:
-    logger.info(f'{event.device} online')
+    logger.info(f'{named(event.device, event.address)} online')
 
 
 HANDLERS = handler_table({ReadingEvent: _reading, DeviceOffline: _offline,

@@ -3,7 +3,9 @@ The ``/diagnostics`` status of one device, from a bus snapshot (contract: level,
 
 Levels: ERROR when the device is offline, unread, unknown (every poll refused), tripped, or
 reports a hazard; WARN for warnings, a failed set-up write, a poll that failed since the last
-reading, or a motor that may be running without an acknowledged start; OK otherwise. Values
+reading, readings older than :data:`STALE_POLLS` poll periods (at least :data:`STALE_MIN_S`:
+the line cannot keep the poll rates), or a motor that may be running without an acknowledged
+start; OK otherwise. Values
 of a reading are shown only with their age: a device whose polls fail shows the failure and
 how old the values are, never old values as current.
 """
@@ -15,6 +17,9 @@ from drive_bridge.bus.master import DeviceSnapshot
 from drive_bridge.bus.motor import Motion
 from drive_bridge.devices.contracts import DeviceReading
 from drive_bridge.ros.naming import status_name  # noqa: F401 - part of this module's API
+
+STALE_POLLS = 3  # readings older than this many poll periods are stale (WARN) ...
+STALE_MIN_S = 0.5  # ... and older than this (the host's own delays at high poll rates)
 
 
 def diagnostic_status(snapshot: DeviceSnapshot, name: str, link: str,
@@ -46,6 +51,12 @@ def _level(snapshot: DeviceSnapshot, reading: DeviceReading) -> tuple:
     if snapshot.poll_failure:
         warnings.append(f'last poll failed ({snapshot.poll_failure}); values are '
                         f'{snapshot.reading_age_s:.1f} s old')
+    elif stale(snapshot):
+        warnings.append(
+            f'readings are {snapshot.reading_age_s:.1f} s old at poll_rate '
+            f'{1 / snapshot.poll_period_s:g} Hz (more than {STALE_POLLS} poll periods): the '
+            "line may be too slow for the poll rates; lower this device's poll_rate or the "
+            "other devices'")
     if snapshot.stats.get('setup_error'):
         warnings.append(snapshot.stats['setup_error'])
     if snapshot.motion is Motion.MAY_RUN:
@@ -53,6 +64,12 @@ def _level(snapshot: DeviceSnapshot, reading: DeviceReading) -> tuple:
     if warnings:
         return DiagnosticStatus.WARN, '; '.join(warnings)
     return DiagnosticStatus.OK, reading.state
+
+
+def stale(snapshot: DeviceSnapshot) -> bool:
+    """Return whether the reading is older than a few poll periods (the line lags behind)."""
+    limit_s = max(STALE_POLLS * snapshot.poll_period_s, STALE_MIN_S)
+    return snapshot.poll_period_s > 0 and snapshot.reading_age_s > limit_s
 
 
 def reading_values(reading: DeviceReading) -> Dict[str, str]:

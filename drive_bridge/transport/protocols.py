@@ -53,6 +53,10 @@ class ProtocolSpec:
     frame_gap_s: Callable[[int, str, int], float] = rtu.frame_gap_s
     min_timeout_s: float = 0.02
     reply_guard_s: float = 0.0
+    # One answered poll transaction, for the keepalive rule (drive_bridge.bus.keepalive):
+    # request and reply characters at most, and how long a device may take to answer.
+    poll_frame_chars: int = 30
+    reply_delay_s: float = fc_telegram.MAX_REPLY_DELAY_S
     # Device addresses the protocol carries, from its options (None: the family's range).
     address_range: Optional[Callable[[Mapping[str, Any]], Tuple[int, int]]] = None
     settings: Tuple[Setting, ...] = ()
@@ -74,6 +78,7 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
         'ap_ascii', 'MCD AP ASCII on a serial port (8N1)', 'serial', AP_ASCII_REQUESTS,
         fixed_framing=('N', 1), default_stopbits=lambda parity: 1,
         min_timeout_s=ap_ascii.MIN_TIMEOUT_S, reply_guard_s=AP_ASCII_GUARD_S,
+        poll_frame_chars=40, reply_delay_s=ap_ascii.MIN_TIMEOUT_S,
         settings=(
             Setting('ap_nak_retries', int, 2,
                     'AP ASCII: how often an exchange answered with NAK (bad LRC, not '
@@ -85,7 +90,7 @@ PROTOCOLS: Dict[str, ProtocolSpec] = {spec.name: spec for spec in (
         'fc_protocol', 'the Danfoss FC protocol on a serial port (VLT 5000/6000 par. 500, '
         'FC 51 par. 8-30; 8E1 by default)', 'serial', (fc_telegram.FcTelegramRequest,),
         default_stopbits=lambda parity: fc_telegram.DEFAULT_STOPBITS,
-        reply_guard_s=FC_PROTOCOL_GUARD_S,
+        reply_guard_s=FC_PROTOCOL_GUARD_S, poll_frame_chars=32,
         frame_gap_s=lambda baudrate, parity, stopbits: fc_telegram.GAP_CHARACTERS *
         rtu.character_time_s(baudrate, parity, stopbits),
         address_range=lambda options: (1, 31) if options.get('address_format') ==

@@ -11,7 +11,7 @@ import pytest
 
 DEVICES = {
     'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 20.0,
-             'speed_reference': 40.0, 'comms_timeout': 2.0, 'comms_timeout_function': 2},
+             'speed_reference': 40.0, 'comms_timeout': 5.5, 'comms_timeout_function': 2},
     'fan': {'family': 'vlt', 'model': 'vlt5000', 'address': 2, 'poll_rate': 20.0,
             'speed_reference': 50.0},
     'watch': {'family': 'vlt', 'model': 'vlt6000', 'address': 3, 'allow_control': False},
@@ -47,7 +47,7 @@ def received(server, unit):
 def test_start_reference_stop_and_readouts_in_one_telegram_a_poll(line):
     server, bus = line
     drive = server.devices[1].model
-    assert wait_until(lambda: drive.parameters[803] == 20 and drive.parameters[804] == 2, 3.0)
+    assert wait_until(lambda: drive.parameters[803] == 55 and drive.parameters[804] == 2, 3.0)
     assert bus.snapshot('conv').model == 'fc51'
     assert all(not word & 1 << 10 for word in received(server, 1))  # nothing valid yet
     assert bus.submit_command('conv', 'start').result(3)

@@ -9,7 +9,7 @@ from ros_helpers import running_node, serving
 
 DEVICES = {
     'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 20.0,
-             'speed_reference': 40.0, 'comms_timeout': 1.0, 'comms_timeout_function': 2,
+             'speed_reference': 40.0, 'comms_timeout': 4.0, 'comms_timeout_function': 2,
              'reference_timeout': 0.0},
     'fan': {'family': 'vlt', 'model': 'vlt5000', 'address': 2, 'poll_rate': 10.0},
 }
