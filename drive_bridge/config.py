@@ -8,7 +8,7 @@ the same validation, so a bad value gets the same one-line message anywhere, nam
 parameter and the allowed values.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import re
 import sys
@@ -281,6 +281,23 @@ def keepalive_gaps(config: BridgeConfig) -> Dict[str, KeepaliveGap]:
     times = line_times(config.link, config.timing)
     return {device.name: keepalive_gap(device.name, loads, times) for device in config.devices
             if device.option('comms_timeout', 0.0) > 0}
+
+
+def check_poll_rate_changes(config: BridgeConfig, poll_rates: Mapping[str, float]) -> None:
+    """
+    Refuse runtime poll rates (device -> Hz) under which a drive's comms_timeout could trip.
+
+    The keepalive rule (:func:`check_comms_timeouts`) holds at configure; a slower poll at
+    runtime stretches the gap between a drive's control words just as a short timeout does.
+    """
+    if not poll_rates:
+        return
+    changed = [replace(device, poll_rate=poll_rates.get(device.name, device.poll_rate))
+               for device in config.devices]
+    try:
+        check_comms_timeouts(replace(config, devices=changed))
+    except ConfigError as error:
+        raise ConfigError(f'poll_rate not changed: {error}') from None
 
 
 def check_comms_timeouts(config: BridgeConfig) -> None:

@@ -239,7 +239,7 @@ class DriveBridgeNode(LifecycleNode):
         session = self._session
         return self._settings.on_set(parameters, self._gate.bus,
                                      session.joint_bridge if session is not None else None,
-                                     self)
+                                     self, self.config)
 
     def _on_diagnostics_timer(self) -> None:
         self._calls.wake()  # answer calls the bus left waiting too long

@@ -217,14 +217,20 @@ class RuntimeSettings:
         self.changes_in_words: Dict[str, str] = {}  # device -> allow_control changed, in words
 
     def on_set(self, parameters: List[Parameter], bus: Optional[BusMaster],
-               joints: Optional[TakesJointSettings],
-               declared: DeclaredParameters) -> SetParametersResult:
-        """Check every change first, then apply them all at once on the bus, or none."""
+               joints: Optional[TakesJointSettings], declared: DeclaredParameters,
+               config: Optional[cfg.BridgeConfig] = None) -> SetParametersResult:
+        """
+        Check every change first, then apply them all at once on the bus, or none.
+
+        ``config``: the bus's configuration, whose poll rates follow the changes taken (the
+        keepalive rule is checked against them).
+        """
         return self._kept_for_configure(parameters, declared) if bus is None else \
-            self._applied(parameters, bus, joints)
+            self._applied(parameters, bus, joints, config)
 
     def _applied(self, parameters: List[Parameter], bus: BusMaster,
-                 joints: Optional[TakesJointSettings]) -> SetParametersResult:
+                 joints: Optional[TakesJointSettings],
+                 config: Optional[cfg.BridgeConfig]) -> SetParametersResult:
         """Check every change, then apply them all on the bus and the joints, or none."""
         def allowed_now(device: str) -> bool:
             return bus.snapshot(device).allow_control
@@ -233,6 +239,10 @@ class RuntimeSettings:
                 parameters, lambda parameter: parameter.name.partition('.')[0] in
                 bus.device_names, allowed_now)
             enabling = self._enabling(changes, allowed_now)  # before the bus takes them
+            poll_rates = {device: change['poll_rate'] for device, change in changes.items()
+                          if 'poll_rate' in change}
+            if config is not None:
+                cfg.check_poll_rate_changes(config, poll_rates)
             if joints is not None:
                 joints.check_settings(changes)
             bus.apply_settings(changes)
@@ -240,6 +250,9 @@ class RuntimeSettings:
                 joints.apply_settings(changes)
         except (ConfigError, CommandRefused) as error:
             return SetParametersResult(successful=False, reason=str(error))
+        if config is not None:
+            for device in config.devices:
+                device.poll_rate = poll_rates.get(device.name, device.poll_rate)
         self._record(changes, enabling, '(allow_control set true): commands and writes are '
                      'taken from now on')
         return SetParametersResult(successful=True)

@@ -19,7 +19,7 @@ pytestmark = pytest.mark.xdist_group('bad_input')
 
 DEVICES = {
     'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 20.0,
-             'speed_reference': 40.0},
+             'speed_reference': 40.0, 'comms_timeout': 30.0},
     'watch': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'allow_control': False},
     'gone': {'family': 'mcd', 'model': 'mcd500', 'address': 30},  # nobody answers
 }
@@ -74,6 +74,8 @@ def test_bad_speed_reference_message(node, sim, value):
     ('conv.speed_reference', 250.0, 'conv.speed_reference out of range'),
     ('conv.poll_rate', -1.0, 'conv.poll_rate out of range Min: 0.1'),
     ('conv.poll_rate', True, "'conv.poll_rate' = True has the wrong type"),
+    # 10 s between polls (and the other devices' polls within them) exceeds par. 8-03
+    ('conv.poll_rate', 0.1, 'poll_rate not changed: conv.comms_timeout 30 s is below 31.'),
     ('conv.reference_timeout', -1.0, 'conv.reference_timeout out of range'),
     ('ghost.poll_rate', 5.0, 'undeclared parameter'),  # no such device (rclpy's words)
 ])
@@ -110,6 +112,9 @@ def test_the_node_survived_the_table(node):
     ('/**/drive_bridge:\n  ros__parameters:\n    devices: [a\n', 'is not valid YAML at line 4'),
     ('just text\n', 'must map a node name'),
     ('/**/drive_bridge:\n  ros__parameters:\n    devices: []\n', "'devices' is empty"),
+    ('/**/drive_bridge:\n  ros__parameters:\n    devices: [conv]\n    conv:\n'
+     '      family: fc\n      address: 1\n      comms_timeout: 0.1\n',
+     'conv.comms_timeout 0.1 s is below'),
     (None, 'cannot read the parameters file'),
 ])
 def test_malformed_parameter_files_stop_the_node_with_one_line(tmp_path, content, expected):

@@ -33,7 +33,7 @@ from drive_bridge.bus.events import (
     BusEvent, DeviceOffline, DeviceOnline, handler_table, ignore, Notice, ReadingEvent,
     StateUnknown)
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import BridgeConfig, build_config
+from drive_bridge.config import BridgeConfig, build_config, keepalive_gaps
 from drive_bridge.errors import CommandRefused
 from drive_bridge.protocol import fc_control
 from drive_bridge.sim.devices import make_device
@@ -95,8 +95,9 @@ class LineDevice:
                           reference_pct=self.values.get('speed_reference', 0.0))
 
 
-# The keepalive rule's gap on this line (100 Hz polls, 7 devices, one silent) is 8.8 s.
-SOAK_COMMS_TIMEOUT_S = 10.0
+# A placeholder: line_config sets each drive's comms_timeout to what the keepalive rule
+# advises for the soak's timeout and poll rate (its gap and the margin), as a user would.
+SOAK_COMMS_TIMEOUT_S = 600.0
 LINE: Tuple[LineDevice, ...] = (
     LineDevice('crusher', {'family': 'mcd', 'model': 'mcd500', 'address': 20}, 'mcd500',
                'mcd'),
@@ -269,6 +270,8 @@ def line_config(port: str, timeout_s: float, poll_rate_hz: float,
               for device in devices}
     bus = {'protocol': 'modbus_rtu', 'port': port, 'baudrate': 19200, 'parity': 'N',
            'timeout': timeout_s, 'devices': list(values)}
+    for name, gap in keepalive_gaps(build_config(bus, values)).items():
+        values[name]['comms_timeout'] = gap.advised_s  # the rule's advice
     return bus, values
 
 

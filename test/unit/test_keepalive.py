@@ -121,6 +121,18 @@ def test_a_faster_line_or_fewer_retries_lowers_the_minimum():
     assert gap.gap_s < 1.2 and gap.parts[0][0] == 'its own poll'
 
 
+def test_a_runtime_poll_rate_is_refused_where_the_timeout_would_no_longer_cover_the_gap():
+    built = config.build_config(BUS, feeder(comms_timeout=3.3))
+    config.check_poll_rate_changes(built, {'feeder': 20.0, 'crusher': 2.0})  # still covered
+    with pytest.raises(ConfigError) as error:
+        config.check_poll_rate_changes(built, {'feeder': 0.5})
+    assert str(error.value).startswith('poll_rate not changed: feeder.comms_timeout 3.3 s is '
+                                       'below ')
+    with pytest.raises(ConfigError, match='poll_rate not changed'):
+        config.check_poll_rate_changes(built, {'crusher': 100.0})  # a neighbour's share too
+    assert [device.poll_rate for device in built.devices] == [5.0, 10.0]  # unchanged
+
+
 def test_every_drive_in_the_example_configs_has_the_margin():
     import glob
     import os
