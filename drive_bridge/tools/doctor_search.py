@@ -160,7 +160,7 @@ def fix(found: Setting, configured: Setting, family: Optional[str]) -> str:
         device.append(f'{where[0]} to {PROTOCOL_WORDS[configured.protocol]}')
         bridge.append(f'protocol: {found.protocol}')
     if found.baudrate != configured.baudrate:
-        device.append(f'{where[1]} to {configured.baudrate}')
+        device.append(f'{where[1]} to {configured.baudrate} baud')
         bridge.append(f'baudrate: {found.baudrate}')
     if found.parity != configured.parity and not PROTOCOLS[found.protocol].fixed_framing:
         device.append(f'{where[2]} to parity {configured.parity}')
