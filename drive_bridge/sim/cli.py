@@ -381,7 +381,7 @@ def _pacer(args: argparse.Namespace) -> Optional[WirePacer]:
 
 
 def _relay(args: argparse.Namespace) -> Optional[AdapterRelay]:
-    """Return the adapter relay of ``--echo``, ``--usb-latency``, ``--babble``, ``--device-line``."""
+    """Return the adapter relay of the adapter and line options (None: none given)."""
     behaviour = AdapterBehaviour(args.echo, args.usb_latency / 1000.0, args.babble,
                                  args.device_line, args.fault_seed)
     if not behaviour.active:

@@ -12,19 +12,18 @@ written to a device. Exit status 0 when devices answered and nothing is wrong, 1
 """
 
 import argparse
-import logging
 import os
 from typing import Callable, Dict, List, Optional, Sequence
 
 from drive_bridge import config as cfg
 from drive_bridge.console import parse_integer
+from drive_bridge.tools import doctor_search as found
 from drive_bridge.tools.cli_scan import parse_range
 from drive_bridge.tools.cli_session import scan_families
 from drive_bridge.tools.cli_target import bus_values, CliError, EXIT_USAGE, file_block
 from drive_bridge.tools.doctor_findings import exit_status, Finding, note, PROBLEM
 from drive_bridge.tools.doctor_line import check_line
 from drive_bridge.tools.doctor_port import DEV_ROOT, port_findings, SYSFS_ROOT
-from drive_bridge.tools import doctor_search as found
 from drive_bridge.transport.link import LinkSettings, pty_device
 from drive_bridge.transport.protocols import PROTOCOLS
 
@@ -88,7 +87,7 @@ def command_doctor(args, out) -> int:
     protocol = bus.get('protocol', 'modbus_rtu')
     if not PROTOCOLS[protocol].is_serial:
         raise CliError(f'doctor checks a serial port, and protocol {protocol} is a gateway: '
-                       'run it on the gateway\'s serial side, or use scan', EXIT_USAGE)
+                       "run it on the gateway's serial side, or use scan", EXIT_USAGE)
     addresses = chosen_addresses(args, blocks)
     bus.setdefault('port', '/dev/ttyUSB0')
     findings: List[Finding] = []
@@ -97,13 +96,8 @@ def command_doctor(args, out) -> int:
         findings.append(finding)
         print(finding.line(), file=out, flush=True)
 
-    framing_notes = logging.getLogger('drive_bridge.transport.serial_port')
-    level = framing_notes.level
-    framing_notes.setLevel(logging.WARNING)  # the pty note, once per setting: the plan says it
-    try:
+    with found.quiet_framing_notes():  # the pty note, once per setting: the plan says it
         hits = diagnose(args, bus, addresses, report)
-    finally:
-        framing_notes.setLevel(level)
     if hits is not None:  # None: the port cannot be used, and its one line says why
         print(f'doctor: {len(hits)} device(s) found, '
               f'{sum(f.level == PROBLEM for f in findings)} problem(s)', file=out)

@@ -1,5 +1,5 @@
 """
-The doctor's checks of the line itself: is it quiet, and does the adapter echo?
+The doctor's checks of the line itself: whether it is quiet, whether the adapter echoes.
 
 The port is opened at the configured settings (exclusively, as the node opens it). First
 the doctor only listens: bytes while nobody was asked mean another master, a device that

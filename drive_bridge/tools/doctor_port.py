@@ -167,7 +167,7 @@ def port_findings(port: str, sysfs_root: str = SYSFS_ROOT, dev_root: str = DEV_R
                         f'port it has{hint}')]
     if not stat.S_ISCHR(os.stat(port).st_mode):
         return [problem('port', f'{port} is not a serial port (no character device): give '
-                        'the adapter\'s port, e.g. /dev/ttyUSB0')]
+                        "the adapter's port, e.g. /dev/ttyUSB0")]
     findings = [ok('port', f'{port} exists'), access_finding(port, port_access(port, access))]
     stable = by_id_finding(port, dev_root)
     if stable is not None:

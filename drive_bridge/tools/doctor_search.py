@@ -10,7 +10,9 @@ remain) is tried once. What answers away from the configured settings gets the f
 sides: the device's parameters, or the bridge's settings.
 """
 
-from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
+from contextlib import contextmanager
+import logging
+from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 from drive_bridge import config as cfg
 from drive_bridge.errors import ConfigError
@@ -61,10 +63,10 @@ class Hit(NamedTuple):
 def settings_to_try(configured: Setting, protocols: Sequence[str] = SEARCH_PROTOCOLS,
                     baudrates: Sequence[int] = SEARCH_BAUDRATES,
                     parities: Sequence[str] = SEARCH_PARITIES, port: str = '') -> List[Setting]:
-    """Return the settings to try, nearest to ``configured`` first, each once as the port sees it."""
+    """Return the settings to try, nearest to ``configured`` first, each once on the port."""
     protocols = _first(configured.protocol, protocols)
-    baudrates, parities = _first(configured.baudrate, baudrates), _first(configured.parity,
-                                                                          parities)
+    baudrates = _first(configured.baudrate, baudrates)
+    parities = _first(configured.parity, parities)
     found: Dict[Tuple, Setting] = {}
     ranked = sorted(
         ((sum((protocol != configured.protocol, baudrate != configured.baudrate,
@@ -98,17 +100,34 @@ def attempt_s(setting: Setting, timeout_s: float) -> float:
 
 
 def search(bus: Dict, addresses: Sequence[int], settings: Sequence[Setting], timeout_s: float,
-           report: Callable[[Finding], None]) -> List[Hit]:
-    """Ask each address at each setting in order until it answers; return what answered."""
+           report: Callable[[Finding], None], first_only: bool = False) -> List[Hit]:
+    """
+    Ask each address at each setting in order until it answers; return what answered.
+
+    ``first_only``: stop at the first setting at which anything answers (scan's hint).
+    """
     missing, hits = list(addresses), []
-    for setting in settings:
-        if not missing:
-            break
-        for hit in _search_setting(bus, missing, setting, timeout_s):
-            missing.remove(hit.address)
-            hits.append(hit)
-            report(hit_finding(hit, bus))
+    with quiet_framing_notes():
+        for setting in settings:
+            if not missing or (first_only and hits):
+                break
+            for hit in _search_setting(bus, missing, setting, timeout_s):
+                missing.remove(hit.address)
+                hits.append(hit)
+                report(hit_finding(hit, bus))
     return hits
+
+
+@contextmanager
+def quiet_framing_notes() -> Iterator[None]:
+    """Keep the pty's framing note (logged once per port opened) out of the search."""
+    notes = logging.getLogger('drive_bridge.transport.serial_port')
+    level = notes.level
+    notes.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        notes.setLevel(level)
 
 
 def _search_setting(bus: Dict, addresses: Sequence[int], setting: Setting,
