@@ -11,6 +11,7 @@ from drive_bridge.transport.port_probe import PROBE_BYTES
 from fake_sysfs import by_id, fake_sysfs, PORT
 import pytest
 
+
 def test_an_ftdi_latency_timer_of_16_ms_is_a_problem_with_the_udev_rule(tmp_path):
     findings = port_findings(PORT, str(fake_sysfs(tmp_path / 'sys')), str(tmp_path / 'dev'))
     lines = {finding.topic: finding for finding in findings}
