@@ -37,6 +37,8 @@ from typing import Dict, List, Optional
 
 from drive_bridge.console import OneLineParser
 from drive_bridge.devices import mcd
+from drive_bridge.sim.adapter import AdapterBehaviour, AdapterRelay, parse_device_line, \
+    SerialSetting
 from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
 from drive_bridge.sim.devices import make_device, SIM_MODELS
 from drive_bridge.sim.faults import FaultPlan, parse_fault_plan
@@ -85,6 +87,14 @@ def non_negative_seconds(text: str) -> float:
     return value
 
 
+def device_line(text: str) -> SerialSetting:
+    """Parse ``--device-line`` (an option's type)."""
+    try:
+        return parse_device_line(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
     parser = OneLineParser(prog='drive_bridge_sim', description=__doc__.split('\n')[0])
@@ -112,6 +122,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--pace', default='', metavar='BAUD[:PARITY[:STOPBITS]]',
                         help='put a wire pacer with this timing in front of the pty (parity '
                              'E, or N for AP ASCII; Modbus RTU gap rule for Modbus)')
+    adapter = parser.add_argument_group(
+        'adapter and line (a relay in front of the pty, after --pace; drive_bridge.sim.adapter)')
+    adapter.add_argument('--echo', action='store_true',
+                         help='the adapter echoes what the master sends (local_echo: true)')
+    adapter.add_argument('--usb-latency', type=non_negative_seconds, default=0.0,
+                         metavar='MS', help='bytes reach the master in batches every MS '
+                         'milliseconds (an FTDI latency timer: 16)')
+    adapter.add_argument('--babble', type=non_negative_seconds, default=0.0,
+                         metavar='BYTES_PER_S', help='noise bytes reach the master at this '
+                         'mean rate (seed: --fault-seed)')
+    adapter.add_argument('--device-line', type=device_line, default=None,
+                         metavar='BAUD[:PARITY[:STOPBITS]]',
+                         help="the devices' baud rate and stop bits: nothing crosses while the "
+                         "master's port is set otherwise (a pty shows no parity: it counts "
+                         'through its stop bits, 2 for N, else 1)')
     parser.add_argument('--start-time', type=float, default=3.0, help='MCD soft start, s')
     parser.add_argument('--stop-time', type=float, default=2.0, help='MCD soft stop, s')
     parser.add_argument('--flc', type=float, default=100.0, help='MCD motor FLC, amperes')
@@ -307,12 +332,16 @@ def main(argv: Optional[List[str]] = None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     signal.signal(signal.SIGINT, lambda *_: done.set())
     pacer = _pacer(args)
+    relay = _relay(args)
     server = build_server(args)
     if not args.no_pty:
-        path = server.open_pty('' if pacer else args.link)
+        path = server.open_pty('' if pacer or relay else args.link)
         if pacer:
-            path = pacer.open_pty(path, args.link)
+            path = pacer.open_pty(path, '' if relay else args.link)
             print(f'paced: {pacer.timing.describe()}', flush=True)
+        if relay:
+            path = relay.open_pty(path, args.link)
+            print(f'adapter: {describe_adapter(relay.behaviour)}', flush=True)
         print(f'pty: {path}', flush=True)
         if args.link:
             print(f'link: {args.link}', flush=True)
@@ -322,6 +351,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     server.start()
     if pacer:
         pacer.start()
+    if relay:
+        relay.start()
     served = [f'{m}@{u}' for m, u in args.device] + \
         [f'{m} in {i} out {o} ({kind})' for i, (m, o, kind) in args.lvsg]
     print('ready: ' + ', '.join(served), flush=True)
@@ -330,6 +361,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         threading.Thread(target=_read_console, args=(server, done), daemon=True).start()
     while not done.wait(0.5):
         pass
+    if relay:
+        relay.stop()
     if pacer:
         pacer.stop()
         print(describe_line(pacer), flush=True)
@@ -345,6 +378,27 @@ def _pacer(args: argparse.Namespace) -> Optional[WirePacer]:
         raise SystemExit('drive_bridge_sim: --pace paces the pty: it does not mix with '
                          '--no-pty or --wire-baud')
     return WirePacer(parse_pace(args.pace, args.protocol))
+
+
+def _relay(args: argparse.Namespace) -> Optional[AdapterRelay]:
+    """Return the adapter relay of the adapter and line options (None: none given)."""
+    behaviour = AdapterBehaviour(args.echo, args.usb_latency / 1000.0, args.babble,
+                                 args.device_line, args.fault_seed)
+    if not behaviour.active:
+        return None
+    if args.no_pty:
+        raise SystemExit('drive_bridge_sim: --echo, --usb-latency, --babble and --device-line '
+                         'act on the pty: they do not mix with --no-pty')
+    return AdapterRelay(behaviour)
+
+
+def describe_adapter(behaviour: AdapterBehaviour) -> str:
+    """Return what the simulated adapter and line do, in words."""
+    parts = (['echo'] if behaviour.echo else []) + \
+        ([f'latency {behaviour.latency_s * 1000:g} ms'] if behaviour.latency_s else []) + \
+        ([f'babble {behaviour.babble_per_s:g} bytes/s'] if behaviour.babble_per_s else []) + \
+        ([f'devices at {behaviour.device_line.describe()}'] if behaviour.device_line else [])
+    return ', '.join(parts)
 
 
 def describe_line(pacer: WirePacer) -> str:

@@ -23,6 +23,7 @@ class PtyLink:
         tty.setraw(master)
         os.set_blocking(master, False)
         self.master = master
+        self.slave = slave  # its terminal settings are the client's (baud rate, stop bits)
         self._fds: List[int] = [master, slave]
         self.path = os.ttyname(slave)
         self.link_path = link_path

@@ -44,6 +44,7 @@ from drive_bridge.tools.cli_session import PARAMETER_TYPES
 from drive_bridge.tools.cli_session import Session  # noqa: F401 (users import it from here)
 from drive_bridge.tools.cli_status import command_monitor, command_status
 from drive_bridge.tools.cli_target import CliError, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE
+from drive_bridge.tools.doctor import add_options as add_doctor_options, command_doctor
 from drive_bridge.transport.protocols import PROTOCOLS
 
 DESCRIPTION = """\
@@ -70,6 +71,7 @@ EXAMPLES = {
                'feeder.yaml',
     'monitor': 'drive-bridge monitor --config config/mixed_bus.yaml --device feeder '
                '--count 3',
+    'doctor': 'drive-bridge doctor --port /dev/ttyUSB0 --baudrate 19200 --address 3',
 }
 
 SUBCOMMANDS = {
@@ -112,6 +114,14 @@ SUBCOMMANDS = {
                 'unless it answers as the family and model given. Then write each parameter '
                 "in the file's order and read every one back. A failure or Ctrl-C part-way "
                 'says which parameters were written.'),
+    'doctor': ('check the port, adapter and line; find the devices',
+               'Check the port (it exists, you may open it, its /dev/serial/by-id/ name), the '
+               'USB adapter (driver; an FTDI latency timer, with the udev rule that sets it to '
+               '1 ms), the line (quiet or babbling, local echo), then search the addresses '
+               'over protocol (Modbus RTU, FC protocol, AP ASCII), baud rate and parity, the '
+               'configured settings first. One line per finding, with its fix. Reads only. '
+               'Exit status 0: devices answered and nothing is wrong; 1: a problem (each '
+               'printed) or no device; 2: a bad argument.'),
     'monitor': ('live decoded status (Ctrl-C ends)',
                 'Poll the device once a period and print one line each time, until Ctrl-C '
                 '(exit status 130) or --count polls. Reads only.'),
@@ -124,12 +134,17 @@ def build_parser() -> argparse.ArgumentParser:
         prog='drive-bridge', description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog='examples:\n' + '\n'.join(f'  {EXAMPLES[name]}' for name in
-                                         ('scan', 'get', 'set', 'backup', 'restore'))
+                                         ('scan', 'doctor', 'get', 'set', 'backup',
+                                          'restore'))
         + '\n\n"drive-bridge COMMAND --help" tells more of each command.')
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     add = _subcommand_adder(commands)
     scan = add('scan', command_scan, device=False)
     scan.add_argument('--addresses', default='1-32', help='address range (default 1-32)')
+    scan.add_argument('--no-search', dest='search', action='store_false',
+                      help='when nothing answers, do not search other protocols, baud rates '
+                      'and parities (at the first addresses of the range)')
+    add_doctor_options(add('doctor', command_doctor, device=False))
     add('status', command_status)
     get = add('get', command_get)
     get.add_argument('parameter', help='number as in the manual: FC 3-41, VLT 205, MCD 4 or 1-4')
