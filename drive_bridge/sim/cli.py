@@ -35,7 +35,7 @@ import threading
 import time
 from typing import Dict, List, Optional
 
-from drive_bridge.console import OneLineParser
+from drive_bridge.console import OneLineParser, plain_text
 from drive_bridge.devices import mcd
 from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
 from drive_bridge.sim.devices import make_device, SIM_MODELS
@@ -87,7 +87,7 @@ def non_negative_seconds(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
-    parser = OneLineParser(prog='drive_bridge_sim', description=__doc__.split('\n')[0])
+    parser = OneLineParser(prog='drive_bridge_sim', description=plain_text(__doc__.strip().split('\n')[0]))
     parser.add_argument('--device', action='append', type=parse_device, default=[],
                         metavar='MODEL:ADDRESS', help=f'models: {", ".join(SIM_MODELS)}')
     parser.add_argument('--lvsg', action='append', type=parse_lvsg, default=[],
