@@ -87,7 +87,8 @@ def non_negative_seconds(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
-    parser = OneLineParser(prog='drive_bridge_sim', description=plain_text(__doc__.strip().split('\n')[0]))
+    parser = OneLineParser(prog='drive_bridge_sim',
+                           description=plain_text(__doc__.strip().split('\n')[0]))
     parser.add_argument('--device', action='append', type=parse_device, default=[],
                         metavar='MODEL:ADDRESS', help=f'models: {", ".join(SIM_MODELS)}')
     parser.add_argument('--lvsg', action='append', type=parse_lvsg, default=[],
