@@ -1167,3 +1167,20 @@ def test_progress_goes_to_stderr_only_on_a_terminal(line, tmp_path):
                         text=True)
     out, error = piped.communicate(timeout=60)
     assert piped.returncode == 0 and error == '' and out.endswith('and verified\n')
+
+
+def test_an_mcd_beyond_the_module_s_switches_needs_the_remote_operator_named(capsys):
+    server = make_sim_server({40: 'mcd500'})
+    server.open_pty()
+    server.record_frames = True
+    server.start()
+    try:
+        code, _ = run('status', *bus(server), '--family', 'mcd', '--address', 40)
+        assert code == 2
+        assert 'DIP switches give 1-31 (manual 000 Appendix B' in one_line(capsys)
+        assert list(server.stats.frames) == []  # refused before the line was opened
+        code, out = run('status', *bus(server), '--family', 'mcd', '--address', 40,
+                        '--mcd-interface', 'remote_operator')
+        assert code == 0 and 'mcd_40: mcd mcd500 at address 40' in out, out
+    finally:
+        server.stop()
