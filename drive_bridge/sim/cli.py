@@ -175,10 +175,11 @@ def build_server(args: argparse.Namespace):
     }
     settings['vlt'] = settings['fc']
     devices: Dict[int, object] = {}
+    line = served_line(args)
     for model, unit in args.device:
         if unit in devices:
             raise SystemExit(f'drive_bridge_sim: address {unit} is used twice')
-        devices[unit] = make_device(model, now, **settings[SIM_MODELS[model]])
+        devices[unit] = make_device(model, now, unit, line, **settings[SIM_MODELS[model]])
     for unit in args.hand_on:
         _set_hand(_device(devices, unit), True)
     for text in args.trip:
@@ -201,6 +202,24 @@ def build_server(args: argparse.Namespace):
                           1 if args.wire_parity != 'N' else 2) if args.wire_baud else None
         server = ModbusSimServer(devices, wire=wire)
     return _with_faults(server, args)
+
+
+def served_line(args: argparse.Namespace) -> Dict[str, object]:
+    """
+    Return the line the devices are served on, as a drive reports it (FC 51 par. 8-30..8-33).
+
+    The protocol, and the timing of ``--pace`` or ``--wire-baud``; a pty without either has
+    no baud rate of its own: the drives then report their default, 9600 baud 8E1.
+    """
+    line: Dict[str, object] = {
+        'protocol': 'fc_protocol' if args.protocol == 'fc_protocol' else 'modbus_rtu'}
+    if args.pace:
+        timing = parse_pace(args.pace, args.protocol)
+        line.update(baudrate=timing.baudrate, parity=timing.parity, stopbits=timing.stopbits)
+    elif args.wire_baud:
+        line.update(baudrate=args.wire_baud, parity=args.wire_parity,
+                    stopbits=1 if args.wire_parity != 'N' else 2)
+    return line
 
 
 def _with_faults(server, args: argparse.Namespace):
