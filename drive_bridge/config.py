@@ -392,6 +392,7 @@ def build_device(name: str, values: Mapping[str, Any], protocol: str) -> DeviceC
     if not low <= checked['address'] <= high:
         raise ConfigError(f'parameter {name + ".address"!r} = {checked["address"]} is out of '
                           f'range for family {family.name}: allowed {low}-{high}')
+    _check_model_address(name, family, checked)
     if protocol not in family.protocols:
         raise ConfigError(f'device {name!r} (family {family.name}) cannot run on protocol '
                           f'{protocol!r}: allowed {", ".join(family.protocols)}')
@@ -464,6 +465,16 @@ def _check_protocol_addresses(devices: List[DeviceConfig], spec, options: Dict[s
             raise ConfigError(f'parameter {device.name + ".address"!r} = {device.address} is '
                               f'out of range for protocol {spec.name!r}'
                               + (f' ({options})' if options else '') + f': allowed {low}-{high}')
+
+
+def _check_model_address(name: str, family, checked: Mapping[str, Any]) -> None:
+    """Refuse an address outside what sets it on this model (MCD: the module's switches)."""
+    if family.model_address_range is None:
+        return
+    low, high, where = family.model_address_range(checked['model'], checked)
+    if not low <= checked['address'] <= high:
+        raise ConfigError(f'parameter {name + ".address"!r} = {checked["address"]} is out of '
+                          f'range: {where}')
 
 
 def _check_unique_addresses(devices: List[DeviceConfig]) -> None:

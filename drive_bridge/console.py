@@ -34,6 +34,10 @@ _PARSER_THAT_RAN = '_one_line_parser'  # the namespace's note of the parser that
 _INTEGER = re.compile(r'[+-]?[0-9]+')
 _NUMBER = re.compile(r'[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?')
 _NOT_FINITE = re.compile(r'[+-]?(nan|inf|infinity)', re.IGNORECASE)
+# Sphinx and MyST markup in a docstring: a role (:data:`X`, :class:`~a.B`, {ref}`x`) and a
+# literal (``x``).
+_ROLE = re.compile(r'(?::[a-z]+(?::[a-z]+)?:|\{[a-z-]+\})`(~?)([^`]*)`')
+_LITERAL = re.compile(r'``(.+?)``', re.DOTALL)
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -73,6 +77,21 @@ class OneLineParser(argparse.ArgumentParser):
         """Print why on one line (and where help is), then exit with :data:`EXIT_USAGE`."""
         reason = ' '.join(message.split())
         self.exit(EXIT_USAGE, f'{self.prog}: error: {reason} (see {self.prog} --help)\n')
+
+
+def plain_text(text: str) -> str:
+    """
+    Return a docstring's text without Sphinx or MyST markup, for a command's ``--help``.
+
+    A role keeps its title, else its target (the last part of a target written with ``~``);
+    a literal keeps its text.
+    """
+    def role(match: 're.Match[str]') -> str:
+        tilde, body = match.groups()
+        if body.endswith('>') and '<' in body:  # `title <target>`
+            return body.split('<')[0].strip()
+        return body.rsplit('.', 1)[-1] if tilde else body
+    return _LITERAL.sub(r'\1', _ROLE.sub(role, text))
 
 
 def parse_integer(text: str) -> int:

@@ -90,7 +90,16 @@ def words(command: str) -> List[str]:
 
 def parameter_reference() -> ModuleType:
     """Return docs/_ext/parameter_reference, the configuration reference as data."""
+    return _extension_module('parameter_reference')
+
+
+def markdown_reference() -> ModuleType:
+    """Return docs/_ext/markdown_reference, which writes the reference tables into pages."""
+    return _extension_module('markdown_reference')
+
+
+def _extension_module(name: str) -> ModuleType:
     extensions = os.path.join(DOCS, '_ext')
     if extensions not in sys.path:
         sys.path.insert(0, extensions)
-    return importlib.import_module('parameter_reference')
+    return importlib.import_module(name)

@@ -412,3 +412,7 @@ class Family:
     settings: Tuple[Any, ...]
     make_profile: Callable[[str, str, Mapping[str, Any]], DeviceProfile]
     reference: bool = False  # takes a speed reference (drives)
+    # (model, options) -> (low, high, what sets the address): a narrower range than
+    # ``address_range`` where the model or a setting decides it (MCD: the module's switches).
+    model_address_range: Optional[
+        Callable[[str, Mapping[str, Any]], Tuple[int, int, str]]] = None

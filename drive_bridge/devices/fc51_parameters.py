@@ -11,7 +11,12 @@ Sources, in order of weight:
   7.1.1 (16-90/16-92/16-94 bit tables);
 - ``shared/research/protocols.md`` "FC-series parameters" (readouts 15-xx/16-xx with their
   type, conversion index and a confirmed/inferred/open status);
-- :mod:`drive_bridge.devices.fc` (the bridge's own entries; same type and conversion here).
+- :mod:`drive_bridge.devices.fc` (the bridge's own entries; same type and conversion here);
+- the FC series' Design Guides, "Network Configuration" (FC 111 section 8.7, FC 300 and VLT
+  AQUA section 7.3.1, public copies found with the search tool): 8-30 Protocol (FC or Modbus
+  RTU), 8-31 Address, 8-32 Baud Rate (2400-115200), 8-33 Parity/Stop Bits (even parity,
+  1 stop bit by default). Manual 004 names only 8-33 (section 5.2.1); no source here gives
+  the option numbers, 8-35 beyond its name, or 8-36 at all (left out).
 
 What is missing: the FC 51 Programming Guide (MG02C6) parameter list, the only source of
 every parameter's type, conversion index and change-during-operation flag, could not be
@@ -71,6 +76,27 @@ MOTOR_POWER_KW: Dict[int, str] = {  # manual 004 4.4.1, 1-20: [1] .. [16]
 TIMEOUT_FUNCTIONS: Dict[int, str] = {
     0: 'Off', 1: 'Freeze output', 2: 'Stop', 3: 'Jogging', 4: 'Max. speed', 5: 'Stop and trip',
 }
+
+# The FC series' "Network Configuration" tables (FC 111 Design Guide section 8.7, FC 300 and
+# VLT AQUA Design Guides 7.3.1, found with the search tool) name 8-30..8-33 and their settings
+# but not their option numbers; manual 004 names only 8-33. The numbers below are the FC
+# series' lists as we know them (inferred): read them on the drive before trusting them.
+FC_NETWORK = 'FC-series Design Guides "Network Configuration" (FC 111 8.7, FC 300 7.3.1)'
+PROTOCOLS_830: Dict[int, str] = {0: 'FC', 2: 'Modbus RTU'}
+BAUD_RATES_832: Dict[int, str] = {
+    0: '2400 Baud', 1: '4800 Baud', 2: '9600 Baud', 3: '19200 Baud', 4: '38400 Baud',
+    5: '57600 Baud', 6: '76800 Baud', 7: '115200 Baud',
+}
+PARITY_833: Dict[int, str] = {
+    0: 'Even Parity, 1 Stop Bit', 1: 'Odd Parity, 1 Stop Bit', 2: 'No Parity, 1 Stop Bit',
+    3: 'No Parity, 2 Stop Bits',
+}
+# What the options mean on the line: (bus protocol, baud rate, (parity, stop bits)).
+PROTOCOL_BY_OPTION: Dict[int, str] = {0: 'fc_protocol', 2: 'modbus_rtu'}
+BAUD_BY_OPTION: Dict[int, int] = {
+    number: int(text.split()[0]) for number, text in BAUD_RATES_832.items()}
+FRAMING_BY_OPTION: Dict[int, Tuple[str, int]] = {0: ('E', 1), 1: ('O', 1), 2: ('N', 1),
+                                                 3: ('N', 2)}
 
 FC51_TABLE: Tuple[ParameterSpec, ...] = (
     # -- 0-** Operation/Display
@@ -146,9 +172,26 @@ FC51_TABLE: Tuple[ParameterSpec, ...] = (
     _p(804, 'Control Word Timeout Function', 'uint8', 0,
        PROTOCOLS + ' (FC 102 option list; the FC 51 subset is open)',
        inferred=('name', 'data_type'), options=TIMEOUT_FUNCTIONS, options_partial=True),
+    # The drive's serial line: backed up, never written by a restore (serial_line).
+    _p(830, 'Protocol', 'uint8', 0,
+       FC_NETWORK + ': "8-30 Protocol" FC or Modbus RTU; FC by default (docs/fc51.md); the '
+       'option numbers are those of the FC series (not in manual 004)',
+       inferred=TYPE_AND_INDEX + ('options', 'default'), options=PROTOCOLS_830,
+       options_partial=True, default=0, serial_line=True),
     _p(831, 'Address', 'uint8', 0,
-       'manual 004 section 5.2.4 (slave addresses 1-247); fc.py: set by par. 8-31',
-       inferred=('name',) + TYPE_AND_INDEX, minimum=1, maximum=247),
+       'manual 004 section 5.2.4 (slave addresses 1-247); ' + FC_NETWORK + ': "8-31 Address"',
+       inferred=TYPE_AND_INDEX, minimum=1, maximum=247, serial_line=True),
+    _p(832, 'Baud Rate', 'uint8', 0,
+       FC_NETWORK + ': "8-32 Baud Rate" 2400-115200; 9600 by default (fc_telegram.py); the '
+       'option numbers are those of the FC series (not in manual 004)',
+       inferred=TYPE_AND_INDEX + ('options', 'default'), options=BAUD_RATES_832,
+       options_partial=True, default=2, serial_line=True),
+    _p(833, 'Parity / Stop Bits', 'uint8', 0,
+       'manual 004 section 5.2.1 ("1 bit for even/odd parity is used; 1 or 2 stop bits if no '
+       'parity is selected (see par. 8-33)"); ' + FC_NETWORK + ': even parity, 1 stop bit by '
+       'default; the option numbers are those of the FC series (not in manual 004)',
+       inferred=TYPE_AND_INDEX + ('options',), options=PARITY_833, default=0,
+       serial_line=True),
     # -- 15-** Drive Information
     _readout(1500, 'Operating Hours', 'uint32', 74, 'confirmed', unit='h'),
     _readout(1501, 'Running Hours', 'uint32', 74, 'confirmed', unit='h'),
@@ -194,7 +237,6 @@ FC51_NAMED: Dict[int, Tuple[str, str]] = {
     619: ('(set to match S200 switch 4)', 'manual 004 section 3.5, table 3.5'),
     730: ('Process PI Normal/Inverse', M4_QM2 + ' ("most PI controllers are Normal")'),
     731: ('Process PI Anti Windup', M4_QM2 + ' ("leave Enabled normally")'),
-    833: ('Parity / Stop Bits', 'manual 004 section 5.2.1'),
     835: ('Minimum Response Delay', 'protocols.md "pymodbus" (RS-485 practice)'),
     850: ('Coasting Select', 'manual 004 section 5.6.2, control word bit 03'),
     853: ('Start Select', 'manual 004 section 5.6.2, control word bit 06'),

@@ -16,11 +16,37 @@ from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, Prot
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.protocol.words import bit, bits
+from drive_bridge.settings import Setting
 
 FAMILY = 'mcd'
 MODELS = ('auto', 'mcd201', 'mcd202', 'mcd500', 'mcd3000')
-# Module DIP switches: 0-31 (0 is Modbus broadcast); Remote Operator: 1-99.
+# What sets an MCD's address, and its range (manual 000). The family's range is their union.
+MODULE, REMOTE_OPERATOR = 'module', 'remote_operator'
+ADDRESS_RANGES: Dict[str, Tuple[int, int, str]] = {
+    # Appendix B "Settings": "Address range 0 to 31" (section 3: set by the DIP switches); 0
+    # is the Modbus broadcast address, which no starter answers.
+    MODULE: (1, 31, 'the MCD Modbus Module DIP switches give 1-31 (manual 000 Appendix B: '
+             '0 to 31, 0 is broadcast); a starter behind a Remote Operator takes 1-99: set '
+             'mcd_interface: remote_operator'),
+    # Section 11.8.2, par. 2 "RS485 network satellite address": 1 to 99 (AP ASCII or Modbus).
+    REMOTE_OPERATOR: (1, 99, 'the Remote Operator par. 2 gives 1-99 (manual 000 section '
+                      '11.8.2)'),
+}
 ADDRESS_RANGE = (1, 99)
+INTERFACE = Setting(
+    'mcd_interface', str, 'auto',
+    'mcd: what sets the address: module = the MCD Modbus Module DIP switches (1-31), '
+    'remote_operator = the Remote Operator, par. 2 (1-99); auto = remote_operator for an '
+    'mcd3000 (it has no Modbus Module), module for the others',
+    choices=('auto', MODULE, REMOTE_OPERATOR))
+
+
+def address_range(model: str, options: Mapping[str, Any]) -> Tuple[int, int, str]:
+    """Return (low, high, what sets it, in words) of the addresses an MCD ``model`` may have."""
+    interface = options.get(INTERFACE.name, 'auto')
+    if interface == 'auto':
+        interface = REMOTE_OPERATOR if model == 'mcd3000' else MODULE
+    return ADDRESS_RANGES[interface]
 
 
 @dataclass(frozen=True)
@@ -386,5 +412,5 @@ ENTRY = Family(
     name=FAMILY,
     description='MCD 201/202/500 via the MCD Modbus Module, MCD 3000 via the Remote Operator',
     models=MODELS, address_range=ADDRESS_RANGE,
-    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'ap_ascii'), settings=(),
-    make_profile=make_profile)
+    protocols=('modbus_rtu', 'modbus_tcp', 'rtu_over_tcp', 'ap_ascii'), settings=(INTERFACE,),
+    make_profile=make_profile, model_address_range=address_range)

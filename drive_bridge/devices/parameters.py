@@ -71,6 +71,9 @@ class ParameterSpec:
     elements: int = 0  # array parameters: how many indexes (0: not an array)
     label: str = ''  # the manual's own designation when it is not the number (FC: 16-14)
     inferred: Tuple[str, ...] = ()  # names of the fields no source states
+    # A setting of the drive's own serial line (protocol, address, baud rate, parity): backed
+    # up and compared on restore, never written by it (that would cut the drive off the line).
+    serial_line: bool = False
 
     def __post_init__(self):
         if self.data_type not in DATA_TYPES and self.data_type != TEXT:

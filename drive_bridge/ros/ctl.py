@@ -10,9 +10,9 @@ environment, as for any ROS process. Exit status: 0 done; 1 the node refused or 
 did not answer in time; 2 bad input, or no such node, service, device or parameter (one
 line on stderr, nothing sent); 130 interrupted; 141 the reader of the output went away
 (``drive_bridge_ctl echo ... | head -1``), as SIGPIPE would end it, without a traceback.
-Letting go of ROS after the command is bounded: a teardown that does not end within
-:data:`TEARDOWN_LIMIT_S` ends the process by SIGALRM (exit status 142 in a shell), after the
-command's own output.
+Letting go of ROS after the command is bounded: a teardown that does not end within 10 s
+(:data:`TEARDOWN_LIMIT_S`) ends the process by SIGALRM (exit status 142 in a shell), after
+the command's own output.
 """
 
 import argparse
@@ -24,7 +24,7 @@ import threading
 from typing import List, Optional
 
 from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE, integer_argument, \
-    number_argument
+    number_argument, plain_text
 from drive_bridge.ros import ctl_commands as commands
 from drive_bridge.ros.ctl_params import ParameterCommands
 from drive_bridge.ros.ctl_session import BridgeSession, Interrupted
@@ -88,7 +88,7 @@ def _parser() -> argparse.ArgumentParser:
     options = _options()
     parser = _Parser(prog=PROG, parents=[options], epilog=EXAMPLES,
                      formatter_class=_Formatter,
-                     description=__doc__.split('\n\n')[1].strip().replace('``', ''))
+                     description=plain_text(__doc__.split('\n\n')[1].strip()))
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     def add(group, name: str, text: str, *arguments: str) -> argparse.ArgumentParser:

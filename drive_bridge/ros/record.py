@@ -24,7 +24,7 @@ import time
 from typing import Dict, List, Optional, Tuple, TYPE_CHECKING
 
 from drive_bridge.bag_metadata import encode_references, REFERENCE_AT_START
-from drive_bridge.console import OneLineParser
+from drive_bridge.console import OneLineParser, plain_text
 from drive_bridge.errors import RecordingError
 from drive_bridge.extras import MissingDependency, require
 from drive_bridge.ros.naming import COMMANDS_NODE_SUFFIX
@@ -56,7 +56,7 @@ class BadInput(Exception):
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser (its arguments are checked by :func:`parse_args`)."""
     parser = OneLineParser(
-        prog=PROG, description=__doc__.split('\n\n')[1].strip().replace('``', ''))
+        prog=PROG, description=plain_text(__doc__.split('\n\n')[1].strip()))
     parser.add_argument('topics', nargs='*', help='topics to record (relative: in --namespace)')
     parser.add_argument('-a', '--all', action='store_true',
                         help='every topic of the drive_bridge node in --namespace')

@@ -35,7 +35,7 @@ import threading
 import time
 from typing import Dict, List, Optional
 
-from drive_bridge.console import OneLineParser
+from drive_bridge.console import OneLineParser, plain_text
 from drive_bridge.devices import mcd
 from drive_bridge.sim.adapter import AdapterBehaviour, AdapterRelay, parse_device_line, \
     SerialSetting
@@ -97,7 +97,8 @@ def device_line(text: str) -> SerialSetting:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
-    parser = OneLineParser(prog='drive_bridge_sim', description=__doc__.split('\n')[0])
+    parser = OneLineParser(prog='drive_bridge_sim',
+                           description=plain_text(__doc__.strip().split('\n')[0]))
     parser.add_argument('--device', action='append', type=parse_device, default=[],
                         metavar='MODEL:ADDRESS', help=f'models: {", ".join(SIM_MODELS)}')
     parser.add_argument('--lvsg', action='append', type=parse_lvsg, default=[],
@@ -199,10 +200,11 @@ def build_server(args: argparse.Namespace):
     }
     settings['vlt'] = settings['fc']
     devices: Dict[int, object] = {}
+    line = served_line(args)
     for model, unit in args.device:
         if unit in devices:
             raise SystemExit(f'drive_bridge_sim: address {unit} is used twice')
-        devices[unit] = make_device(model, now, **settings[SIM_MODELS[model]])
+        devices[unit] = make_device(model, now, unit, line, **settings[SIM_MODELS[model]])
     for unit in args.hand_on:
         _set_hand(_device(devices, unit), True)
     for text in args.trip:
@@ -225,6 +227,24 @@ def build_server(args: argparse.Namespace):
                           1 if args.wire_parity != 'N' else 2) if args.wire_baud else None
         server = ModbusSimServer(devices, wire=wire)
     return _with_faults(server, args)
+
+
+def served_line(args: argparse.Namespace) -> Dict[str, object]:
+    """
+    Return the line the devices are served on, as a drive reports it (FC 51 par. 8-30..8-33).
+
+    The protocol, and the timing of ``--pace`` or ``--wire-baud``; a pty without either has
+    no baud rate of its own: the drives then report their default, 9600 baud 8E1.
+    """
+    line: Dict[str, object] = {
+        'protocol': 'fc_protocol' if args.protocol == 'fc_protocol' else 'modbus_rtu'}
+    if args.pace:
+        timing = parse_pace(args.pace, args.protocol)
+        line.update(baudrate=timing.baudrate, parity=timing.parity, stopbits=timing.stopbits)
+    elif args.wire_baud:
+        line.update(baudrate=args.wire_baud, parity=args.wire_parity,
+                    stopbits=1 if args.wire_parity != 'N' else 2)
+    return line
 
 
 def _with_faults(server, args: argparse.Namespace):

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import math
 from typing import Deque, Dict, Optional
 
-from drive_bridge.devices import fc, vlt
+from drive_bridge.devices import fc, fc51_parameters as fc51, vlt
 from drive_bridge.devices.parameters import ParameterSpec
 from drive_bridge.protocol import fc_control as ctl, fc_scaling
 from drive_bridge.sim.fc_parameter_store import FcParameterStore
@@ -55,6 +55,12 @@ class FcSimConfig:
     ctw_timeout_function: int = TIMEOUT_OFF  # par. 8-04
     thermal_time_constant_s: float = 120.0
     extra_parameters: Dict[int, int] = field(default_factory=dict)
+    # The line the simulator serves it on; the FC 51 reports them as par. 8-30..8-33.
+    address: int = 1
+    protocol: str = 'modbus_rtu'  # or fc_protocol
+    baudrate: int = 9600
+    parity: str = 'E'
+    stopbits: int = 1
 
 
 class FcModel:
@@ -297,6 +303,22 @@ def parameter_store(config: FcSimConfig, family: str) -> FcParameterStore:
         configured.update({124: round(config.motor_current_a * 100),
                            803: round(config.ctw_timeout_s * 10),
                            804: config.ctw_timeout_function, 3: 0})
+        configured.update(serial_line_parameters(config))
     return FcParameterStore(table, data.conversion_factors, configured, config.extra_parameters,
                             maxima={} if family == 'vlt' else {804: TIMEOUT_TRIP},
                             option_card=family == 'vlt')
+
+
+def serial_line_parameters(config: FcSimConfig) -> Dict[int, object]:
+    """Return par. 8-30..8-33 as the line the drive is served on (its address among them)."""
+    def option(by_option: Dict[int, object], value: object, what: str) -> int:
+        for number, meaning in by_option.items():
+            if meaning == value:
+                return number
+        raise ValueError(f'the FC 51 has no par. 8-3x option for {what} {value!r}: allowed '
+                         f'{", ".join(str(meaning) for meaning in by_option.values())}')
+    return {830: option(fc51.PROTOCOL_BY_OPTION, config.protocol, 'protocol'),
+            831: config.address,
+            832: option(fc51.BAUD_BY_OPTION, config.baudrate, 'baud rate'),
+            833: option(fc51.FRAMING_BY_OPTION, (config.parity, config.stopbits),
+                        'parity and stop bits')}

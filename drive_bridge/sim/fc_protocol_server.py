@@ -180,6 +180,7 @@ def make_fc_protocol_server(models: Dict[int, str], settings: Optional[dict] = N
         if model not in FC_PROTOCOL_MODELS:
             raise ValueError(f'{model!r} does not speak the FC protocol here: allowed '
                              f'{", ".join(FC_PROTOCOL_MODELS)}')
-        config = FcSimConfig(model=model, **(settings or {}))
+        config = FcSimConfig(model=model, address=address, protocol='fc_protocol',
+                             baudrate=wire_baud or fc.DEFAULT_BAUDRATE, **(settings or {}))
         devices[address] = FcProtocolDevice(FcModel(config, now), address_formats)
     return FcProtocolSimServer(devices, wire_baud=wire_baud)

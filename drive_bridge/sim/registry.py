@@ -24,12 +24,15 @@ class Simulator:
     family: str  # the name in drive_bridge.devices.registry.FAMILIES
     models: Tuple[str, ...]
     make_device: Callable[..., SimDevice]  # (model, now_s, **settings) -> a Modbus face
+    # Its config takes the line it is served on (address, protocol, baudrate, parity,
+    # stopbits): the FC 51 reports them as its par. 8-30..8-33.
+    knows_its_line: bool = False
 
 
 SIMULATORS: Dict[str, Simulator] = {entry.family: entry for entry in (
     Simulator(mcd.FAMILY, tuple(mcd.MODEL_FEATURES), make_mcd_device),
-    Simulator(fc.FAMILY, ('fc51',), make_drive_device),
-    Simulator(vlt.FAMILY, vlt.MODELS, make_drive_device),
+    Simulator(fc.FAMILY, ('fc51',), make_drive_device, knows_its_line=True),
+    Simulator(vlt.FAMILY, vlt.MODELS, make_drive_device, knows_its_line=True),
 )}
 
 # model name -> family name, for every simulated model.

@@ -225,6 +225,10 @@ def _subcommand_adder(commands):
             chosen.add_argument('--model', help='e.g. fc51, vlt6000, mcd500 (default auto; '
                                 'VLT: required)')
             chosen.add_argument('--address', type=integer_argument)
+            chosen.add_argument('--mcd-interface', dest='mcd_interface',
+                                choices=('module', 'remote_operator'),
+                                help='MCD: what sets the address: module (DIP switches, 1-31; '
+                                'default but for the mcd3000) or remote_operator (1-99)')
         if writes:
             sub.add_argument('--force', action='store_true', help=FORCE_HELP[name])
         return sub

@@ -154,12 +154,15 @@ def restore_checked(session: Session, backup, args, out) -> None:
     if reasons:
         refuse_restore(backup, session.name, reasons, len(backup.entries))
     values = {number: info.whole_number(value) for number, value in backup.values().items()}
+    line = serial_line_values(session.table(), values)
+    values = {number: value for number, value in values.items() if number not in line}
     options = ParameterOptions(eeprom=args.eeprom)
     reasons = unwritable(session, profile, backup, values, options)
     if len(reasons) == 1 and reasons[0].startswith(EVERY_ENTRY):
         refuse_restore(backup, session.name, reasons)
     if reasons:
         refuse_restore(backup, session.name, reasons, len(values))
+    held = read_all(session, list(line), 'reading the serial line settings', args, out)
     write_all(session, values, options, args, out)
     try:
         verify = read_all(session, list(values), 'verifying', args, out)
@@ -173,8 +176,28 @@ def restore_checked(session: Session, backup, args, out) -> None:
         raise CliError(f'verify failed for {len(different)} parameters (first: '
                        f'{session.label(number)}: wrote {values[number]!r}, reads '
                        f'{verify[number]!r})')
-    print(f'{len(values)} parameters restored to {profile.model} {session.name} and verified',
-          file=out)
+    for number in line:
+        if not info.same_value(line[number], held[number]):
+            warn(f'{session.label(number)}: the file has {line[number]!r}, {session.name} '
+                 f'holds {held[number]!r}: not written, as a setting of the serial line; '
+                 'change it at the drive, then the bus settings')
+    kept = f'; {len(line)} serial line settings ({", ".join(map(session.manual_number, line))})' \
+        ' not written' if line else ''
+    print(f'{len(values)} parameters restored to {profile.model} {session.name} and verified'
+          f'{kept}', file=out)
+
+
+def serial_line_values(table: Dict[int, ParameterSpec], values: Dict[int, Any]) \
+        -> Dict[int, Any]:
+    """
+    Return the values of the drive's serial line settings (FC 51 8-30..8-33) in a restore.
+
+    A restore never writes them: a new protocol, address, baud rate or parity takes effect
+    on the drive's line and cuts it off the bus (the bridge would then write the rest to
+    nobody, or to another drive at that address). They are compared with the drive's instead.
+    """
+    return {number: value for number, value in values.items()
+            if number in table and table[number].serial_line}
 
 
 def unwritable(session: Session, profile: DeviceProfile, backup: backup_file.Backup,

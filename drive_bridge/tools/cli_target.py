@@ -20,7 +20,7 @@ from drive_bridge.transport.protocols import PROTOCOLS
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 BUS_OPTIONS = ('protocol', 'port', 'host', 'tcp_port', 'baudrate', 'parity', 'stopbits',
                'timeout')
-DEVICE_OPTIONS = ('family', 'model', 'address')
+DEVICE_OPTIONS = ('family', 'model', 'address', 'mcd_interface')
 ADDRESSES = (1, 247)  # what any device address may be (the family or protocol may narrow it)
 
 

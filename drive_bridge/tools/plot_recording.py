@@ -25,7 +25,7 @@ import sys
 from typing import Dict, List, Optional, Tuple
 
 from drive_bridge.bag_metadata import decode_references
-from drive_bridge.console import OneLineParser
+from drive_bridge.console import OneLineParser, plain_text
 from drive_bridge.extras import MissingDependency, require
 
 PROG = 'drive_bridge_plot'
@@ -236,8 +236,8 @@ def _draw_values(axis, field: str, samples: Samples, end_s: float) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
-    parser = OneLineParser(prog=PROG, description=__doc__.split(
-        '\n\n')[1].split('. ')[0].replace('``', '') + '.')
+    parser = OneLineParser(prog=PROG, description=plain_text(
+        __doc__.split('\n\n')[1].split('. ')[0]) + '.')
     parser.add_argument('recording', help='bag directory (or a file in it)')
     parser.add_argument('output', help='PNG file to write')
     parser.add_argument('--device', action='append',

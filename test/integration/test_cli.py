@@ -23,6 +23,7 @@ from drive_bridge.protocol import rtu
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
+from drive_bridge.sim.modbus_server import WireTiming
 from drive_bridge.tools.cli import build_parser, main, Session
 from drive_bridge.tools.cli_target import make_bus
 from integration_helpers import first_line_then_reader_gone
@@ -557,8 +558,8 @@ def test_ctrl_c_during_restore_exits_130_and_says_how_far_it_got(line, tmp_path,
     code, _ = run('restore', *bus(line), *FC51, path)
     error = one_line(capsys)
     assert code == 130
-    assert 'interrupted: 4 of 29 parameters were written (entries 1-4, 0-03 to 1-22)' in error
-    assert '1-23 (its write may or may not have reached the device) and the 24 after it ' \
+    assert 'interrupted: 4 of 28 parameters were written (entries 1-4, 0-03 to 1-22)' in error
+    assert '1-23 (its write may or may not have reached the device) and the 23 after it ' \
            'were not' in error
     values = model(line, 1).parameters
     assert all(values[pnu] != 77 for pnu in pnus[:4]) and values[pnus[4]] == 77
@@ -573,7 +574,7 @@ def test_a_device_failure_during_restore_says_which_were_written(line, tmp_path,
     error = one_line(capsys)
     position = [row['pnu'] for row in rows].index(124)
     assert code == 1 and 'not possible in the present mode' in error
-    assert f'{position} of 29 parameters were written (entries 1-{position},' in error
+    assert f'{position} of 28 parameters were written (entries 1-{position},' in error
     assert '1-24 and the' in error
 
 
@@ -972,7 +973,7 @@ def test_backup_refuses_an_existing_file_reading_nothing_unless_force(line, tmp_
         'to overwrite it\n')
     assert path.read_text() == 'my notes\n' and not line.stats.frames
     code, out = run('backup', *bus(line), *FC51, '--force', path)
-    assert code == 0 and out == f'29 parameters of fc_1 saved to {path} and verified\n'
+    assert code == 0 and out == f'32 parameters of fc_1 saved to {path} and verified\n'
     assert yaml.safe_load(path.read_text())['model'] == 'fc51'
     assert sorted(os.listdir(tmp_path)) == ['feeder.yaml']  # no temporary file left
 
@@ -1004,7 +1005,8 @@ def test_the_backup_header_gives_the_whole_restore_command_and_it_restores(line,
                        '--address', '1', str(path)]
     model(line, 1).parameters[341] = 999
     code, out = run(*command)
-    assert code == 0 and '29 parameters restored to fc51 fc_1 and verified' in out
+    assert code == 0 and '28 parameters restored to fc51 fc_1 and verified; 4 serial line ' \
+        'settings (8-30, 8-31, 8-32, 8-33) not written' in out
     assert model(line, 1).parameters[341] == 300
 
 
@@ -1161,9 +1163,95 @@ def test_progress_goes_to_stderr_only_on_a_terminal(line, tmp_path):
         assert done.wait(timeout=60) == 0
     finally:
         os.close(controller)
-    assert out == f'29 parameters of fc_1 saved to {path} and verified\n'
-    assert b'reading' in drawn and b'/29 [' in drawn and b'verifying' in drawn
+    assert out == f'32 parameters of fc_1 saved to {path} and verified\n'
+    assert b'reading' in drawn and b'/32 [' in drawn and b'verifying' in drawn
     piped = cli_process(*argv, '--force', stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                         text=True)
     out, error = piped.communicate(timeout=60)
     assert piped.returncode == 0 and error == '' and out.endswith('and verified\n')
+
+
+def test_an_mcd_beyond_the_module_s_switches_needs_the_remote_operator_named(capsys):
+    server = make_sim_server({40: 'mcd500'})
+    server.open_pty()
+    server.record_frames = True
+    server.start()
+    try:
+        code, _ = run('status', *bus(server), '--family', 'mcd', '--address', 40)
+        assert code == 2
+        assert 'DIP switches give 1-31 (manual 000 Appendix B' in one_line(capsys)
+        assert list(server.stats.frames) == []  # refused before the line was opened
+        code, out = run('status', *bus(server), '--family', 'mcd', '--address', 40,
+                        '--mcd-interface', 'remote_operator')
+        assert code == 0 and 'mcd_40: mcd mcd500 at address 40' in out, out
+    finally:
+        server.stop()
+
+
+@pytest.fixture
+def drives_at_2_and_3():
+    server = make_sim_server({2: 'fc51', 3: 'fc51'}, wire=WireTiming(19200, 'N', 2))
+    server.open_pty()
+    server.record_frames = True
+    server.start()
+    yield server
+    server.stop()
+
+
+def get_value(server, address, parameter, *line_options):
+    code, out = run('get', *line_options, '--family', 'fc', '--address', address, parameter)
+    assert code == 0, out
+    return out.split(' = ')[1].split()[0]
+
+
+def test_the_simulated_fc51_reports_its_own_address_and_line_in_8_30_to_8_33(
+        drives_at_2_and_3):
+    server = drives_at_2_and_3
+    for address in (2, 3):
+        assert get_value(server, address, '8-31', *bus(server)) == str(address)
+        assert get_value(server, address, '8-30', *bus(server)) == '2'  # Modbus RTU
+        assert get_value(server, address, '8-32', *bus(server)) == '3'  # 19200 baud
+        assert get_value(server, address, '8-33', *bus(server)) == '3'  # no parity, 2 stop
+
+
+def test_the_simulated_fc51_on_the_fc_protocol_reports_it_in_8_30():
+    server = make_fc_protocol_server({2: 'fc51'})
+    port = f'socket://127.0.0.1:{server.open_tcp()}'
+    server.start()
+    try:
+        options = ('--port', port, '--protocol', 'fc_protocol', '--timeout', 1.0, '--quiet')
+        assert get_value(server, 2, '8-30', *options) == '0'  # FC
+        assert get_value(server, 2, '8-31', *options) == '2'
+        assert get_value(server, 2, '8-32', *options) == '2'  # 9600 baud
+        assert get_value(server, 2, '8-33', *options) == '0'  # even parity, 1 stop bit
+    finally:
+        server.stop()
+
+
+def test_a_restore_compares_the_serial_line_settings_and_never_writes_them(
+        drives_at_2_and_3, tmp_path, capsys):
+    server = drives_at_2_and_3
+    device = ('--family', 'fc', '--address', 2)
+    path = backup(server, tmp_path, device)
+    content = yaml.safe_load(path.read_text())
+    entries = {row['number']: row for row in content['parameters']}
+    assert {label: entries[label]['value'] for label in ('8-30', '8-31', '8-32', '8-33')} == \
+        {'8-30': 2, '8-31': 2, '8-32': 3, '8-33': 3}
+    entries['8-31']['value'] = 7  # a file edited (or taken from a drive elsewhere)
+    entries['8-32']['value'] = 2
+    path.write_text(yaml.safe_dump(content, sort_keys=False))
+    drive = model(server, 2)
+    drive.parameters[341] = 999
+    capsys.readouterr()
+    server.stats.frames.clear()
+    code, out = run('restore', *bus(server), *device, path)
+    error = capsys.readouterr().err
+    assert code == 0 and '28 parameters restored to fc51 fc_2 and verified; 4 serial line ' \
+        'settings (8-30, 8-31, 8-32, 8-33) not written' in out, out + error
+    assert drive.parameters[341] == 300  # the rest is restored
+    assert (drive.parameters[831], drive.parameters[832]) == (2, 3)
+    assert '8-31: the file has 7, fc_2 holds 2: not written, as a setting of the serial ' \
+        'line' in error
+    assert '8-32: the file has 2, fc_2 holds 3' in error and '8-30:' not in error
+    written = {int.from_bytes(frame[2:4], 'big') for frame in writes_to(server, 2)}
+    assert written and not written & {10 * pnu - 1 for pnu in (830, 831, 832, 833)}

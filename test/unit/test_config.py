@@ -69,6 +69,41 @@ def test_bad_values_give_one_clear_line(bus, device, message):
     assert '\n' not in str(error.value)
 
 
+MODULE_RANGE = ("'starter.address' = 32 is out of range: the MCD Modbus Module DIP switches "
+                'give 1-31 (manual 000 Appendix B')
+
+
+@pytest.mark.parametrize('protocol, device, message', [
+    ('modbus_rtu', {'address': 32}, MODULE_RANGE),
+    ('ap_ascii', {'address': 32}, MODULE_RANGE),
+    ('modbus_rtu', {'model': 'auto', 'address': 32}, MODULE_RANGE),
+    ('modbus_rtu', {'model': 'mcd202', 'address': 99, 'mcd_interface': 'module'},
+     'set mcd_interface: remote_operator'),
+    ('modbus_rtu', {'model': 'mcd3000', 'mcd_interface': 'module', 'address': 32},
+     MODULE_RANGE),
+    ('modbus_rtu', {'model': 'mcd3000', 'address': 100},
+     "'starter.address' = 100 is out of range for family mcd: allowed 1-99"),
+    ('modbus_rtu', {'mcd_interface': 'keypad'},
+     "'starter.mcd_interface' = 'keypad' is invalid: allowed auto, module, remote_operator"),
+])
+def test_an_mcd_address_beyond_what_sets_it_is_refused(protocol, device, message):
+    bus = {'protocol': protocol, 'parity': 'N'} if protocol == 'ap_ascii' else {}
+    with pytest.raises(ConfigError) as error:
+        build(bus, {'starter': {**GOOD_DEVICE, **device}})
+    assert message in str(error.value)
+    assert '\n' not in str(error.value)
+
+
+@pytest.mark.parametrize('device', [
+    {'address': 31}, {'address': 1},
+    {'address': 99, 'mcd_interface': 'remote_operator'},
+    {'model': 'mcd3000', 'address': 99},  # the MCD 3000 takes the Remote Operator's range
+])
+def test_an_mcd_address_within_what_sets_it_is_taken(device):
+    built = build(None, {'starter': {**GOOD_DEVICE, **device}})
+    assert built.devices[0].address == device['address']
+
+
 def test_the_late_reply_guard_is_the_protocol_s_own_unless_set():
     assert build().link.guard_s == 0.1  # Modbus RTU
     assert build({'late_reply_guard': 0.4}).link.guard_s == 0.4

@@ -11,7 +11,7 @@ build checks that too, with Sphinx).
 import os
 import re
 
-from docs_helpers import all_blocks, DOCS, pages, parameter_reference, ROOT
+from docs_helpers import all_blocks, DOCS, markdown_reference, pages, parameter_reference, ROOT
 from drive_bridge import config
 from drive_bridge.devices import fc
 from drive_bridge.devices.contracts import FixedControl
@@ -24,7 +24,6 @@ import pytest
 README_MAX_LINES = 250
 LINK = re.compile(r'(?<!!)\[[^\]]*\]\(([^)\s]+)\)')
 IMAGE = re.compile(r'!\[[^\]]*\]\(([^)\s]+)\)')
-DIRECTIVE = re.compile(r'^```\{settings-table\} (\S+)', re.MULTILINE)
 
 
 def test_the_reference_holds_every_declared_setting_and_nothing_else():
@@ -38,10 +37,41 @@ def test_every_group_of_the_reference_is_shown_on_a_page():
     shown = set()
     for page in pages():
         with open(page, encoding='utf-8') as stream:
-            shown.update(DIRECTIVE.findall(stream.read()))
+            shown.update(markdown_reference().shown_groups(stream.read()))
     keys = {group.key for group in parameter_reference().groups()}
     assert keys - shown == set(), 'groups no page shows'
     assert shown - keys == set(), 'pages show groups that do not exist'
+
+
+def test_the_reference_tables_in_the_pages_are_those_the_code_makes():
+    module = markdown_reference()
+    stale = [os.path.relpath(page, ROOT) for page, _ in module.stale_pages()]
+    assert stale == [], f'the reference tables differ from the code: run {module.COMMAND}'
+
+
+def test_no_page_shows_a_table_as_a_directive_github_cannot_render():
+    tables = re.compile(r'^```\{(settings-table|families-table|protocols-table)\}', re.M)
+    for page in pages():
+        with open(page, encoding='utf-8') as stream:
+            assert not tables.search(stream.read()), page
+
+
+def test_a_stale_table_is_found_and_made_again(tmp_path):
+    module = markdown_reference()
+    page = tmp_path / 'page.md'
+    fresh = module.regenerate('<!-- settings-table family:fc -->\n<!-- end settings-table -->')
+    assert '`<name>.comms_timeout`' in fresh
+    page.write_text(fresh.replace('comms_timeout', 'old_name', 1), encoding='utf-8')
+    assert [path for path, _ in module.stale_pages(str(tmp_path))] == [str(page)]
+    page.write_text(fresh, encoding='utf-8')
+    assert module.stale_pages(str(tmp_path)) == []
+
+
+def test_a_note_for_a_parameter_the_group_lacks_is_refused():
+    module = markdown_reference()
+    with pytest.raises(module.TableError, match='notes for nothing_here'):
+        module.regenerate('<!-- settings-table family:fc\nnothing_here: x\n-->\n'
+                          '<!-- end settings-table -->')
 
 
 def headings(path: str) -> set:

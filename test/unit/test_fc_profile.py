@@ -408,3 +408,12 @@ def test_a_start_with_a_0_percent_reference_reads_running_at_0_hz():
     model.write_control(fc_control.RAMP_STOP_WORD, 0, 1.0)  # no start signal: ready
     assert profile.reading(model.status_word(), model.actual_word(),
                            FixedControl(Command.STOP)).state == 'ready'
+
+
+def test_the_simulated_fc51_reports_the_line_it_is_served_on():
+    served = FcModel(FcSimConfig(address=3, protocol='fc_protocol', baudrate=38400,
+                                 parity='O', stopbits=1), now_s=0.0)
+    assert [served.read_parameter(n, 1, 0.0) for n in (830, 831, 832, 833)] == [
+        [0], [3], [4], [1]]
+    with pytest.raises(ValueError, match='no par. 8-3x option for baud rate 1200: allowed'):
+        FcModel(FcSimConfig(baudrate=1200), now_s=0.0)

@@ -4,7 +4,8 @@ import math
 
 from drive_bridge.devices import fc, mcd, vlt
 from drive_bridge.devices.fc51_parameters import (
-    FC51_NAMED, FC51_NAMED_RANGES, FC51_PARAMETERS, FC51_TABLE, label)
+    BAUD_BY_OPTION, FC51_NAMED, FC51_NAMED_RANGES, FC51_PARAMETERS, FC51_TABLE,
+    FRAMING_BY_OPTION, label, PROTOCOL_BY_OPTION)
 from drive_bridge.devices.mcd_parameters import (
     by_register, find, MCD_PARAMETERS, McdParameter, REMOTE_OPERATOR)
 from drive_bridge.devices.parameters import (
@@ -176,6 +177,32 @@ def test_manual_004_5_5_6_writes_65535_as_655_35_s_to_0x1cab():
     assert (spec.address, spec.registers) == (0x1CAB, 2)
     assert encode_value(spec, 655.35, FC_CONVERSION_FACTORS) == [0x0000, 0xFFFF]
     assert check_value(spec, 655.35, FC_CONVERSION_FACTORS) is None
+
+
+def test_manual_004_serial_line_settings_8_30_to_8_33():
+    line = [spec for spec in FC_SPECS if spec.serial_line]
+    assert [spec.label for spec in line] == ['8-30', '8-31', '8-32', '8-33']
+    assert all(spec.setting for spec in line)  # backed up (a restore compares them)
+    address = FC51_PARAMETERS[831]
+    assert (address.minimum, address.maximum) == (1, 247)  # section 5.2.4
+    assert 'manual 004 section 5.2.4' in address.source
+    parity = FC51_PARAMETERS[833]
+    assert 'manual 004 section 5.2.1' in parity.source and parity.name == 'Parity / Stop Bits'
+    # 5.2.1: "1 bit for even/odd parity is used; 1 or 2 stop bits if no parity is selected"
+    assert set(FRAMING_BY_OPTION.values()) == {('E', 1), ('O', 1), ('N', 1), ('N', 2)}
+    assert parity.options[parity.default] == 'Even Parity, 1 Stop Bit'
+    for number, (parity_letter, stopbits) in FRAMING_BY_OPTION.items():
+        text = parity.options[number]
+        assert text.startswith({'E': 'Even', 'O': 'Odd', 'N': 'No'}[parity_letter])
+        assert text.endswith(f'{stopbits} Stop Bit' + ('s' if stopbits == 2 else ''))
+    baud = FC51_PARAMETERS[832]
+    assert BAUD_BY_OPTION[baud.default] == 9600  # the default of 8-32 (fc_telegram.py)
+    assert (min(BAUD_BY_OPTION.values()), max(BAUD_BY_OPTION.values())) == (2400, 115200)
+    assert {PROTOCOL_BY_OPTION[number] for number in FC51_PARAMETERS[830].options} == {
+        'fc_protocol', 'modbus_rtu'}
+    # Manual 004 does not give the option numbers: they are named as inferred.
+    assert all('options' in FC51_PARAMETERS[number].inferred for number in (830, 832, 833))
+    assert 833 not in FC51_NAMED and 835 in FC51_NAMED  # 8-35: a name, nothing else known
 
 
 def test_manual_004_quick_menu_limits():

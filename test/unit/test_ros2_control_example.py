@@ -11,6 +11,7 @@ test/ros/test_joints_node.py.
 
 import importlib.util
 import os
+import re
 import sys
 import types
 from xml.etree import ElementTree
@@ -204,3 +205,41 @@ def test_the_launch_file_starts_the_controllers_and_the_bridge(launch_file, name
     assert bridge_node.kwargs['name'] == 'drive_bridge'
     assert bridge_node.kwargs['namespace'] == namespace.strip('/')
     assert bridge_node.kwargs['parameters'] == [arguments['bridge_params']]
+
+
+def recipe_block(command: str) -> str:
+    """Return the first line of docs/ros2_control.md's simulator recipe that starts so."""
+    with open(os.path.join(ROOT, 'docs', 'ros2_control.md'), encoding='utf-8') as stream:
+        section = stream.read().split('## Against the simulator')[1].split('\n## ')[0]
+    return next(line for line in section.splitlines() if line.startswith(command))
+
+
+def test_the_apt_line_installs_what_the_launch_file_needs():
+    with open(os.path.join(EXAMPLE, 'two_wheel_base.launch.py'), encoding='utf-8') as stream:
+        docstring = stream.read().split('"""')[1]
+    needed = set(re.findall(r'ros-jazzy-[a-z-]+[a-z]', docstring))
+    line = recipe_block('sudo apt install ')
+    assert len(needed) == 6 and set(line.split()[3:]) == needed
+
+
+def test_the_recipe_s_parameters_are_the_example_s_on_the_simulator_s_port():
+    sed = recipe_block("sed 's|")
+    old, new = sed.split("'")[1].split('|')[1:3]
+    assert sed.split('"')[1].endswith('/config/ros2_control/drive_bridge.yaml')
+    with open(os.path.join(EXAMPLE, 'drive_bridge.yaml'), encoding='utf-8') as stream:
+        text = stream.read()
+    assert text.count(old) == 1
+    parameters = dict(yaml.safe_load(text.replace(old, new))['/**/drive_bridge']
+                      ['ros__parameters'])
+    names = parameters['devices']
+    built = config.build_config(parameters, {name: parameters.pop(name) for name in names})
+    assert built.link.port == new == recipe_block('drive_bridge_sim ').split('--link ')[1]
+    simulated = re.findall(r'--device fc51:(\d+)', recipe_block('drive_bridge_sim '))
+    assert sorted(device.address for device in built.devices) == [int(a) for a in simulated]
+    pace = recipe_block('drive_bridge_sim ').split('--pace ')[1].split()[0]
+    assert pace == f'{built.link.baudrate}:{built.link.parity}:1'
+    assert built.link.protocol == 'fc_protocol' and '--protocol fc_protocol' in \
+        recipe_block('drive_bridge_sim ')
+    launch = recipe_block('ros2 launch ')
+    assert launch.split()[2:4] == ['drive_bridge', 'two_wheel_base.launch.py']
+    assert 'bridge_params:=/tmp/base_sim.yaml' in launch and '> /tmp/base_sim.yaml' in sed
