@@ -142,6 +142,13 @@ function proto.init()
     context = {}
 end
 
+-- Text for the Info column and messages: printable ASCII kept, other bytes as \xNN.
+local function printable(text)
+    return (text:gsub('[^\32-\126]', function(char)
+        return string.format('\\x%02X', char:byte())
+    end))
+end
+
 local function byte_sum(tvb, offset, length)
     local sum = 0
     for index = offset, offset + length - 1 do
@@ -194,7 +201,7 @@ local function add_lrc(tree, tvb, body_length, skip_first, parts)
         item:append_text(' [correct]')
     else
         item:add_proto_expert_info(e.bad_lrc, string.format(
-            'Bad LRC "%s": expected %02X', range:string(),
+            'Bad LRC "%s": expected %02X', printable(range:string()),
             (256 - byte_sum(tvb, 0, body_length) % 256) % 256))
         table.insert(parts, '[BAD LRC]')
     end
@@ -221,7 +228,7 @@ local function remember(pinfo, update)
 end
 
 local function dissect_address(tvb, pinfo, tree, parts)
-    local digits = tvb(1, 2):string()
+    local digits = printable(tvb(1, 2):string())
     local address = tonumber(digits)
     if address == nil or not digits:match('^%d%d$') then
         tree:add_proto_expert_info(e.bad_digits, 'Address digits "' .. digits
@@ -239,7 +246,7 @@ local function dissect_address(tvb, pinfo, tree, parts)
 end
 
 local function dissect_message(tvb, pinfo, tree, parts)
-    local code = tvb(1, 3):string()
+    local code = printable(tvb(1, 3):string())
     local seen = remember(pinfo, function()
         last.code, last.code_frame = code, pinfo.number
         last.kind = REQUESTS[code] and KIND_REQUEST or KIND_COMMAND
@@ -279,7 +286,7 @@ end
 -- The four digits of a data reply, as the request before it asked (ap_ascii.decode_status,
 -- decode_data).
 local function decode_digits(tvb, tree, code, range)
-    local digits = range:string()
+    local digits = printable(range:string())
     if code == 'C22' or code == 'C18' then
         local value = status_value(digits)
         if value == nil then
@@ -379,11 +386,13 @@ end
 
 function proto.dissector(tvb, pinfo, tree)
     local length = tvb:len()
-    if length == 0 then
-        return 0
-    end
     pinfo.cols.protocol = 'AP ASCII'
     local root = tree:add(proto, tvb())
+    if length == 0 then
+        root:add_proto_expert_info(e.bad_length, 'Empty packet: no frame')
+        pinfo.cols.info = 'Empty packet [WRONG LENGTH]'
+        return 0
+    end
     local first = tvb(0, 1):uint()
     local expected, handler, implied = frame_spec(first, length)
     local direction = pinfo.p2p_dir

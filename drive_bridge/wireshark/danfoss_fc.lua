@@ -47,6 +47,13 @@ local function xor_bytes(tvb, offset, length)
     return result
 end
 
+-- Text for the Info column: printable ASCII kept, other bytes as \xNN.
+local function printable(text)
+    return (text:gsub('[^\32-\126]', function(char)
+        return string.format('\\x%02X', char:byte())
+    end))
+end
+
 local function signed16(word)
     return word >= 0x8000 and word - 0x10000 or word
 end
@@ -338,7 +345,7 @@ local function add_parameter(tree, tvb, lge, direction)
         if length > 0 then
             local text = tvb(7, length):string()
             tree:add(f.text, tvb(7, length))
-            info = info .. string.format(' text "%s"', text)
+            info = info .. string.format(' text "%s"', printable(text))
         else
             tree:add(f.text, tvb(7, 0), '')
             info = info .. ' text ""'
@@ -358,11 +365,13 @@ end
 
 function proto.dissector(tvb, pinfo, tree)
     local length = tvb:len()
-    if length == 0 then
-        return 0
-    end
     pinfo.cols.protocol = 'Danfoss FC'
     local root = tree:add(proto, tvb())
+    if length == 0 then
+        root:add_proto_expert_info(e.bad_length, 'Empty packet: no telegram')
+        pinfo.cols.info = 'Empty packet [WRONG LENGTH]'
+        return 0
+    end
     local direction = pinfo.p2p_dir
     if direction ~= 0 and direction ~= 1 then
         direction = nil
