@@ -215,7 +215,10 @@ def ap_frames():
            (SENT, bad_lrc), (RECEIVED, bytes([ap_ascii.NAK])),  # 27, 28
            (SENT, ap_ascii.message_fragment('B16')), (RECEIVED, bytes([ap_ascii.BEL])),  # 29, 30
            (RECEIVED, b'\x99'),  # 31: unknown start byte
-           (RECEIVED, ap_ascii.data_fragment(b'0012')[:6])])  # 32: cut
+           (RECEIVED, ap_ascii.data_fragment(b'0012')[:6])]  # 32: cut
+        # manual 001: "status byte = 1Fh, response is: STX 30h 30h 31h 46h LRC1 LRC2 ETX"
+        + exchange(7, 'C22', bytes([2, 0x30, 0x30, 0x31, 0x46]) + b'%02X\x03' % (
+            -(2 + 0x30 + 0x30 + 0x31 + 0x46) & 0xFF)))  # 33-36
 
 
 @pytest.fixture(scope='module')
@@ -229,6 +232,7 @@ AP_FIELDS = ['danfoss_ap_ascii.direction', 'danfoss_ap_ascii.kind', 'danfoss_ap_
              'danfoss_ap_ascii.code', 'danfoss_ap_ascii.command', 'danfoss_ap_ascii.request',
              'danfoss_ap_ascii.data', 'danfoss_ap_ascii.answers', 'danfoss_ap_ascii.status',
              'danfoss_ap_ascii.status.state', 'danfoss_ap_ascii.status.initialised',
+             'danfoss_ap_ascii.status.positive_rotation',
              'danfoss_ap_ascii.status.comms_fault', 'danfoss_ap_ascii.trip_code',
              'danfoss_ap_ascii.trip_name', 'danfoss_ap_ascii.current_a',
              'danfoss_ap_ascii.temperature_pct', 'danfoss_ap_ascii.reply',
@@ -274,6 +278,8 @@ def test_ap_ascii_replies_decoded_as_their_request_asked(ap_rows):
     assert ap(ap_rows[19], 'answers', 'current_a') == ['D10', '123']
     assert ap(ap_rows[23], 'address', 'answers', 'temperature_pct') == ['12', 'D12', '105']
     assert ap_rows[23]['_ws.col.Info'] == 'Starter unit 12: motor temperature 105 %'
+    assert ap(ap_rows[35], 'data', 'status', 'status.state', 'status.positive_rotation',
+              'lrc_bad') == ['001F', '0x1f', '15', '1', '0']
 
 
 def test_ap_ascii_errors_nak_and_bel(ap_trace, ap_rows):
