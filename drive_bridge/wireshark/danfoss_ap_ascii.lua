@@ -151,8 +151,8 @@ end
 
 local function byte_sum(tvb, offset, length)
     local sum = 0
-    for index = offset, offset + length - 1 do
-        sum = sum + tvb(index, 1):uint()
+    for _, byte in ipairs({ tvb:raw(offset, length):byte(1, -1) }) do
+        sum = sum + byte
     end
     return sum
 end

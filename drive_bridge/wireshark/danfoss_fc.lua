@@ -39,10 +39,13 @@ local function xor2(a, b)
     return result
 end
 
+-- Lua 5.2 (Wireshark 4.0) has bit32; without it (Lua 5.3+ built without compatibility) xor2.
+local bxor = bit32 and bit32.bxor or xor2
+
 local function xor_bytes(tvb, offset, length)
     local result = 0
-    for index = offset, offset + length - 1 do
-        result = xor2(result, tvb(index, 1):uint())
+    for _, byte in ipairs({ tvb:raw(offset, length):byte(1, -1) }) do
+        result = bxor(result, byte)
     end
     return result
 end
