@@ -15,12 +15,15 @@ setup(
     name=PACKAGE,
     version=VERSION,
     packages=find_packages(include=['drive_bridge', 'drive_bridge.*']),  # not test/, bench/
+    # the Wireshark dissectors (docs/wireshark.md): in the package for drive-bridge wireshark
+    package_data={PACKAGE: ['wireshark/*.lua']},
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE}/config/ros2_control', glob('config/ros2_control/*')),
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),
+        (f'share/{PACKAGE}/wireshark', glob(f'{PACKAGE}/wireshark/*.lua')),
     ],
     # PyYAML: parameter and backup files, bag metadata (package.xml: python3-yaml)
     install_requires=['setuptools', 'pymodbus>=3.6.9', 'pyserial>=3.5', 'tqdm>=4.66',

@@ -7,8 +7,11 @@ The layout (pcapng, IETF draft-ietf-opsawg-pcapng; tried with tshark 4.0, see
 ``LINKTYPE_WIRESHARK_UPPER_PDU`` (252), and one Enhanced Packet Block per frame. Each packet
 starts with Wireshark's "exported PDU" tag list, which names the dissector that decodes it:
 ``mbrtu`` (Modbus RTU) and ``mbtcp`` (Modbus TCP, with the TCP port tags, so that query and
-response are told apart) are Wireshark's own; the FC protocol, AP ASCII and the LVSG image
-are decoded by the Lua dissectors shipped with the package (:data:`DISSECTORS`). The
+response are told apart) are Wireshark's own; the FC protocol and AP ASCII are decoded by the
+Lua dissectors shipped with the package (:data:`DISSECTORS`, ``drive_bridge/wireshark/``). An
+LVSG image travels in plain Modbus frames (RTU or TCP, as the gateway speaks): the shipped
+postdissector ``danfoss_lvsg`` adds its bytes and bits to them, configured by a preference
+naming each slave's registers (``docs/wireshark.md``). The
 direction is the packet's ``epb_flags`` (inbound/outbound, shown as ``frame.p2p_dir``); the
 comment (``frame.comment``) carries the transaction's outcome and the frame's end time.
 
@@ -51,12 +54,13 @@ EXP_PDU_TAG_DST_PORT = 26
 PORT_TYPE_TCP = 2
 
 # The dissector of each wire protocol's frames (the Lua ones ship in share/.../wireshark/).
+# No entry for LVSG: its frames are Modbus frames (the postdissector danfoss_lvsg decodes the
+# image in them).
 DISSECTORS = {
     'modbus_rtu': 'mbrtu',
     'modbus_tcp': 'mbtcp',
     'fc_protocol': 'danfoss_fc',
     'ap_ascii': 'danfoss_ap_ascii',
-    'lvsg': 'danfoss_lvsg',
 }
 
 

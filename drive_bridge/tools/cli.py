@@ -44,6 +44,7 @@ from drive_bridge.tools.cli_session import PARAMETER_TYPES
 from drive_bridge.tools.cli_session import Session  # noqa: F401 (users import it from here)
 from drive_bridge.tools.cli_status import command_monitor, command_status
 from drive_bridge.tools.cli_target import CliError, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE
+from drive_bridge.tools.cli_wireshark import add_wireshark_command
 from drive_bridge.tools.doctor import add_options as add_doctor_options, command_doctor
 from drive_bridge.transport.protocols import PROTOCOLS
 
@@ -166,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help='seconds between polls (default 0.5)')
     monitor.add_argument('--count', type=poll_count, default=0,
                          help='stop after N polls (0: never)')
+    add_wireshark_command(commands)
     return parser
 
 
