@@ -44,6 +44,7 @@ from drive_bridge.tools.cli_session import PARAMETER_TYPES
 from drive_bridge.tools.cli_session import Session  # noqa: F401 (users import it from here)
 from drive_bridge.tools.cli_status import command_monitor, command_status
 from drive_bridge.tools.cli_target import CliError, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE
+from drive_bridge.tools.trace_text import command_trace_text
 from drive_bridge.transport.protocols import PROTOCOLS
 
 DESCRIPTION = """\
@@ -70,6 +71,7 @@ EXAMPLES = {
                'feeder.yaml',
     'monitor': 'drive-bridge monitor --config config/mixed_bus.yaml --device feeder '
                '--count 3',
+    'trace-text': 'drive-bridge trace-text line.pcapng > line.txt',
 }
 
 SUBCOMMANDS = {
@@ -115,6 +117,11 @@ SUBCOMMANDS = {
     'monitor': ('live decoded status (Ctrl-C ends)',
                 'Poll the device once a period and print one line each time, until Ctrl-C '
                 '(exit status 130) or --count polls. Reads only.'),
+    'trace-text': ('print a pcapng wire trace as text, one line a frame',
+                   'Print a wire trace written to a .pcapng file (the wire_trace parameter, '
+                   '--wire-trace) as the text form: time, line, TX or RX, the bytes, the '
+                   'outcome, the duration and the unit; to paste into an issue. Opens no '
+                   'port.'),
 }
 
 
@@ -151,6 +158,13 @@ def build_parser() -> argparse.ArgumentParser:
                          help='seconds between polls (default 0.5)')
     monitor.add_argument('--count', type=poll_count, default=0,
                          help='stop after N polls (0: never)')
+    summary, description = SUBCOMMANDS['trace-text']
+    text = commands.add_parser('trace-text', help=summary,
+                               description=textwrap.fill(description, 79),
+                               epilog=f'example:\n  {EXAMPLES["trace-text"]}',
+                               formatter_class=argparse.RawDescriptionHelpFormatter)
+    text.set_defaults(function=command_trace_text)
+    text.add_argument('file', help='a .pcapng wire trace')
     return parser
 
 
@@ -200,6 +214,9 @@ def _subcommand_adder(commands):
                          help='0 (default): 2 with no parity, 1 with parity')
         bus.add_argument('--timeout', type=number_argument,
                          help='seconds per transaction (default 0.5)')
+        bus.add_argument('--wire-trace', dest='wire_trace', metavar='FILE',
+                         help='write every frame both ways to FILE: *.pcapng (Wireshark) or '
+                         '*.txt / *.log (text); see docs/wire_trace.md')
         sub.add_argument('--quiet', action='store_true', help='no progress bar and no notes '
                          '(such as the pty note); warnings and errors still print')
         if device:

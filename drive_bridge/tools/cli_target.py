@@ -19,7 +19,7 @@ from drive_bridge.transport.protocols import PROTOCOLS
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 BUS_OPTIONS = ('protocol', 'port', 'host', 'tcp_port', 'baudrate', 'parity', 'stopbits',
-               'timeout')
+               'timeout', 'wire_trace')
 DEVICE_OPTIONS = ('family', 'model', 'address')
 ADDRESSES = (1, 247)  # what any device address may be (the family or protocol may narrow it)
 
