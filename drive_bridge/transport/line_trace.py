@@ -14,7 +14,7 @@ protocol's framer does, gives each its outcome and hands them to the
 import time
 from typing import Callable, List, Optional, Tuple
 
-from drive_bridge.errors import AmbiguousReply, MismatchedReply
+from drive_bridge.errors import MismatchedReply
 from drive_bridge.protocol.framing import Framer
 from drive_bridge.transport.wire_trace import TraceRecord, WireTrace
 
@@ -137,15 +137,13 @@ def window_spans(framer: Framer, data: bytes, unit: Optional[int],
         elif framer.names_units and frame.unit != unit:
             spans.append((position, end, 'late', frame.unit))
         else:
-            spans.append((position, end, _unit_outcome(outcome, error), frame.unit))
+            spans.append((position, end, _unit_outcome(outcome), frame.unit))
         position = end
     return spans
 
 
-def _unit_outcome(outcome: str, error: Optional[BaseException]) -> str:
-    """Return the outcome of a valid frame of the unit in a window that ended so."""
-    if isinstance(error, AmbiguousReply):
-        return 'ambiguous'
+def _unit_outcome(outcome: str) -> str:
+    """Return the outcome of a valid frame of the unit in a window that ended ``outcome``."""
     return 'bad_frame' if outcome in ('timeout', 'truncated', 'wrong_address') else outcome
 
 

@@ -16,7 +16,7 @@ its side of the line with the same class.
 """
 
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timedelta
 import logging
 import os
 from typing import BinaryIO, Callable, Iterable, Optional, Tuple
@@ -88,7 +88,8 @@ def comment(record: TraceRecord) -> str:
 
 def text_line(record: TraceRecord, interface: str) -> str:
     """Return one line of the text form (no newline), candump-like; see the docs."""
-    moment = datetime.fromtimestamp(record.start_ns // 1000 / 1e6)
+    seconds, nanoseconds = divmod(record.start_ns, 1_000_000_000)
+    moment = datetime.fromtimestamp(seconds) + timedelta(microseconds=nanoseconds // 1000)
     direction = 'RX' if record.inbound else 'TX'
     tail = ' '.join(field for field in (
         record.outcome, f'{(record.end_ns - record.start_ns) / 1e6:.2f}ms',
