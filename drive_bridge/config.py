@@ -68,7 +68,7 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
             'answered as failed and never sent', low=0.1, high=30.0),
     Setting('wire_trace', str, '',
             'file to trace every frame of the bus to, both ways with times and outcomes: '
-            '*.pcapng (Wireshark) or *.txt / *.log (text, one line a frame); empty = off'),
+            'a .pcapng file (Wireshark) or .txt / .log (text, one line a frame); empty = off'),
     Setting('wire_trace_max_mb', float, 10.0,
             'megabytes a wire trace file may reach before it is renamed <name>.1.<ext> and a '
             'new one begins', low=0.01, high=100000.0),

@@ -140,8 +140,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the master's timeout (the bridge's 'timeout'), for 'late' "
                              'replies')
     parser.add_argument('--wire-trace', default='', metavar='FILE',
-                        help='write every request read and reply written to FILE: *.pcapng '
-                             '(Wireshark) or *.txt / *.log (text); see docs/wire_trace.md')
+                        help='write every request read and reply written to FILE, a '
+                             '.pcapng (Wireshark) or .txt / .log (text); see docs/wire_trace.md')
     return parser
 
 

@@ -215,8 +215,8 @@ def _subcommand_adder(commands):
         bus.add_argument('--timeout', type=number_argument,
                          help='seconds per transaction (default 0.5)')
         bus.add_argument('--wire-trace', dest='wire_trace', metavar='FILE',
-                         help='write every frame both ways to FILE: *.pcapng (Wireshark) or '
-                         '*.txt / *.log (text); see docs/wire_trace.md')
+                         help='write every frame both ways to FILE, a .pcapng (Wireshark) or '
+                         '.txt / .log (text); see docs/wire_trace.md')
         sub.add_argument('--quiet', action='store_true', help='no progress bar and no notes '
                          '(such as the pty note); warnings and errors still print')
         if device:

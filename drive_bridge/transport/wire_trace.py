@@ -10,9 +10,9 @@ transaction's window, a quarantine), so a crash loses at most the transaction un
 
 Bounded: once a file would pass ``max_mb``, it is renamed ``trace.1.pcapng`` (the older
 ones shift up to ``trace.<files - 1>``, the oldest dropped) and a new one begins with its
-own headers, so each file opens alone. A write error (disk full, permission) disables the
-trace with one logged line; the bus goes on. Standard library only: the simulator writes
-its side of the line with the same class.
+own headers, so each file opens alone; the file of a run before is shifted so too. A write
+error (disk full, permission) disables the trace with one logged line; the bus goes on.
+Standard library only: the simulator writes its side of the line with the same class.
 """
 
 from dataclasses import dataclass
@@ -158,6 +158,7 @@ class WireTrace:
         self._open = opener
         self._file: Optional[BinaryIO] = None
         self._size = 0
+        self._started = False  # a file was opened (the one of a run before shifted first)
         self.enabled = True
         self.records = 0  # written since the start (all files)
 
@@ -185,6 +186,8 @@ class WireTrace:
 
     def _put(self, block: bytes) -> None:
         if self._file is None:
+            if not self._started and os.path.exists(self.settings.path):
+                self._shift()  # the file of a run before: kept as trace.1
             self._start()
         elif self._size + len(block) > self.settings.max_bytes:
             self._rotate()
@@ -192,16 +195,22 @@ class WireTrace:
         self._size += len(block)
 
     def _start(self) -> None:
-        """Open the file (replacing one of a run before) and write its headers."""
+        """Open the file and write its headers."""
+        self._started = True
         self._file = self._open(self.settings.path)
         header = self.form.header()
         self._file.write(header)
         self._size = len(header)
 
     def _rotate(self) -> None:
-        """Close the file, shift trace.N to trace.N+1 (the oldest dropped), start anew."""
+        """Close the file, shift the files and start a new one."""
         self._file.close()
         self._file = None
+        self._shift()
+        self._start()
+
+    def _shift(self) -> None:
+        """Rename trace.N to trace.N+1 and the trace to trace.1 (the oldest dropped)."""
         path, keep = self.settings.path, self.settings.files - 1
         if keep < 1:
             os.remove(path)
@@ -210,7 +219,6 @@ class WireTrace:
                 if os.path.exists(rotated_name(path, index)):
                     os.replace(rotated_name(path, index), rotated_name(path, index + 1))
             os.replace(path, rotated_name(path, 1))
-        self._start()
 
     def _fail(self, error: Exception) -> None:
         """Disable the trace with one line; the line goes on untraced."""

@@ -110,6 +110,17 @@ def test_a_full_file_is_rotated_the_oldest_dropped_and_each_file_stays_within_th
     assert trace.records == 800
 
 
+def test_the_file_of_a_run_before_is_shifted_to_1_not_overwritten(tmp_path):
+    path = str(tmp_path / 'line.txt')
+    for run in range(3):
+        trace = WireTrace(TraceSettings(path, files=2), f'run{run}', 'modbus_rtu')
+        trace.write(exchange())
+        trace.close()
+    assert sorted(os.listdir(tmp_path)) == ['line.1.txt', 'line.txt']
+    assert 'run1' in open(rotated_name(path, 1)).readline()
+    assert 'run2' in open(path).readline()
+
+
 @needs_tshark
 def test_a_rotated_pcapng_file_opens_alone_in_tshark(tmp_path):
     path = str(tmp_path / 'line.pcapng')
