@@ -96,8 +96,8 @@ def test_rtu_over_tcp_is_traced_as_modbus_rtu_named_by_host_and_port(tmp_path):
     rows = tshark_fields(path, 'frame.p2p_dir', 'mbrtu.unit_id', 'modbus.regval_uint16',
                          'frame.interface_name', 'frame.comment')
     line = f'127.0.0.1:{port}'
-    assert [row[:2] + [row[3]] for row in rows] == [['0', '20', line], ['1', '20', line],
-                                                   ['0', '23', line]]
+    shown = [row[:2] + [row[3]] for row in rows]
+    assert shown == [['0', '20', line], ['1', '20', line], ['0', '23', line]]
     assert rows[1][2] and outcomes(rows) == ['ok', 'ok', 'timeout']
 
 
