@@ -38,6 +38,12 @@ class RecordingTrace:
 
     def __init__(self):
         self.records = []
+        self.enabled = True
+        self.failures = []
+
+    def fail(self, error) -> None:
+        self.enabled = False
+        self.failures.append(error)
 
     def write(self, records) -> None:
         self.records.extend(records)

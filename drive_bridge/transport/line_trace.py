@@ -45,6 +45,29 @@ class LineTracer:
     def window(self, unit: Optional[int], error: Optional[BaseException],
                broadcast: bool = False) -> None:
         """Write the request and the frames its window read, with their outcomes."""
+        self._guarded(self._window, unit, error, broadcast)
+
+    def discarded(self, outcome: str = 'quarantined') -> None:
+        """Write what a quarantine read: whole frames naming their unit, the rest as runs."""
+        self._guarded(self._discarded, outcome)
+
+    def _guarded(self, write: Callable[..., None], *args) -> None:
+        """
+        Run ``write`` unless the trace is off; a failure stops the trace, never the line.
+
+        It runs where the discipline handles an error of the line: raising here would hide it.
+        """
+        if not self.trace.enabled:
+            self._chunks, self._request = [], None
+            return
+        try:
+            write(*args)
+        except Exception as error:  # noqa: B902 - whatever it is, the bus goes on untraced
+            self._chunks, self._request = [], None
+            self.trace.fail(error)
+
+    def _window(self, unit: Optional[int], error: Optional[BaseException],
+                broadcast: bool) -> None:
         outcome = 'broadcast' if broadcast else _kind(error)
         records = []
         request = self._request
@@ -66,8 +89,7 @@ class LineTracer:
                                                               error)]
         self._write(records, data, spans)
 
-    def discarded(self, outcome: str = 'quarantined') -> None:
-        """Write what a quarantine read: whole frames naming their unit, the rest as runs."""
+    def _discarded(self, outcome: str) -> None:
         if not self._chunks:
             return
         data = b''.join(chunk for _, chunk in self._chunks)

@@ -29,11 +29,16 @@ class PacketTracer:
 
     def packet(self, sending: bool, data: bytes) -> bytes:
         """Note a packet pymodbus sends or received; return it unchanged (its hook's rule)."""
-        now_ns = time.time_ns()
-        if sending:
-            self._records.append(TraceRecord(False, bytes(data), now_ns, now_ns))
-        elif data:
-            self._receive(bytes(data), now_ns)
+        if not self.trace.enabled:
+            return data
+        try:
+            now_ns = time.time_ns()
+            if sending:
+                self._records.append(TraceRecord(False, bytes(data), now_ns, now_ns))
+            elif data:
+                self._receive(bytes(data), now_ns)
+        except Exception as error:  # noqa: B902 - whatever it is, pymodbus goes on untraced
+            self._stop(error)
         return data
 
     def wrap(self, client) -> None:
@@ -50,7 +55,21 @@ class PacketTracer:
         client.send, client.recv = traced_send, traced_recv
 
     def end(self, unit: int, error: Optional[BaseException]) -> None:
-        """Write the transaction's ADUs: ``error`` None is ok, else its kind."""
+        """Write the transaction's ADUs: ``error`` None is ok, else its kind; never raise."""
+        if not self.trace.enabled:
+            self._records, self._received = [], b''
+            return
+        try:
+            self._end(unit, error)
+        except Exception as failure:  # noqa: B902 - the transaction's own error goes on
+            self._stop(failure)
+
+    def _stop(self, error: Exception) -> None:
+        """Stop the trace with its one line; forget what was collected."""
+        self._records, self._received = [], b''
+        self.trace.fail(error)
+
+    def _end(self, unit: int, error: Optional[BaseException]) -> None:
         outcome = 'ok' if error is None else getattr(error, 'kind', 'link')
         records, self._records = self._records, []
         if self._received:  # part of an ADU: the reply was cut short

@@ -173,7 +173,7 @@ class WireTrace:
             if self._file is not None:
                 self._file.flush()
         except (OSError, ValueError) as error:
-            self._fail(error)
+            self.fail(error)
 
     def close(self) -> None:
         """Flush and close the file (idempotent)."""
@@ -182,7 +182,7 @@ class WireTrace:
             try:
                 file.close()
             except OSError as error:
-                self._fail(error)
+                self.fail(error)
 
     def _put(self, block: bytes) -> None:
         if self._file is None:
@@ -220,8 +220,10 @@ class WireTrace:
                     os.replace(rotated_name(path, index), rotated_name(path, index + 1))
             os.replace(path, rotated_name(path, 1))
 
-    def _fail(self, error: Exception) -> None:
-        """Disable the trace with one line; the line goes on untraced."""
+    def fail(self, error: Exception) -> None:
+        """Disable the trace with one line (once); the line goes on untraced."""
+        if not self.enabled:
+            return
         self.enabled = False
         file, self._file = self._file, None
         if file is not None:

@@ -12,6 +12,7 @@ from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.transport import line_trace
 from drive_bridge.transport.link import LinkSettings
+from drive_bridge.transport.packet_trace import PacketTracer
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
 from fakes import FakeClock, ScriptedLine
 import pytest
@@ -149,3 +150,47 @@ def test_with_no_trace_the_line_is_not_wrapped_and_no_tracer_code_runs(monkeypat
     with pytest.raises(NoResponse):
         transport.execute(20, READ)
     transport.execute(20, READ)
+
+
+class BrokenTrace(RecordingTrace):
+    """A trace whose writing fails with an error nobody foresaw."""
+
+    def write(self, records) -> None:
+        raise RuntimeError('a bug in the trace')
+
+
+def test_a_failing_trace_stops_itself_and_never_changes_what_the_transaction_raises():
+    spoiled = OURS[:-1] + bytes([OURS[-1] ^ 0xFF])
+    transport, line, _ = traced_line([(TURNAROUND_S, spoiled)], [(TURNAROUND_S, OURS)])
+    trace = BrokenTrace()
+    transport.discipline.tracer.trace = trace
+    with pytest.raises(CrcError):
+        transport.execute(20, READ)
+    assert transport.execute(20, READ) == [1010, 1011, 1012]
+    assert [str(error) for error in trace.failures] == ['a bug in the trace']
+
+
+def test_a_failing_modbus_tcp_trace_stops_itself_and_lets_the_transaction_go_on():
+    tracer = PacketTracer(BrokenTrace())
+    adu = bytes.fromhex('000100000006140300020002')
+    assert tracer.packet(True, adu) == adu
+    assert tracer.packet(False, bytes.fromhex('00010000000714030400410042')) is not None
+    tracer.end(20, None)  # does not raise
+    assert [str(error) for error in tracer.trace.failures] == ['a bug in the trace']
+    tracer.end(20, None)
+    assert len(tracer.trace.failures) == 1
+
+
+def test_modbus_tcp_adus_are_cut_by_their_length_and_another_id_is_late():
+    trace = RecordingTrace()
+    tracer = PacketTracer(trace)
+    request = bytes.fromhex('000200000006140300020002')
+    late = bytes.fromhex('00010000000714030400410042')
+    answer = bytes.fromhex('00020000000714030400410043')
+    tracer.packet(True, request)
+    both = late + answer
+    tracer.packet(False, both[:5])  # pymodbus 3.6 reads a header, then the rest
+    tracer.packet(False, both[5:])
+    tracer.end(20, None)
+    assert trace.rows() == [('TX', request.hex(), 'ok', 20), ('RX', late.hex(), 'late', 20),
+                            ('RX', answer.hex(), 'ok', 20)]
