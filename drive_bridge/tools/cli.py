@@ -133,6 +133,9 @@ def build_parser() -> argparse.ArgumentParser:
         epilog='examples:\n' + '\n'.join(f'  {EXAMPLES[name]}' for name in
                                          ('scan', 'get', 'set', 'backup', 'restore'))
         + '\n\n"drive-bridge COMMAND --help" tells more of each command.')
+    parser.add_argument('--wire-trace', dest='global_wire_trace', metavar='FILE',
+                        help="trace every frame of the command's bus to FILE (as each "
+                        "command's --wire-trace)")
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     add = _subcommand_adder(commands)
     scan = add('scan', command_scan, device=False)

@@ -69,6 +69,8 @@ def file_block(args: argparse.Namespace) -> Tuple[Dict[str, Any], Dict[str, Dict
 def bus_values(args: argparse.Namespace, from_file: Mapping[str, Any]) -> Dict[str, Any]:
     """Return the bus settings: the file's, with the options given winning."""
     options = given(args, BUS_OPTIONS)
+    if getattr(args, 'global_wire_trace', None) and 'wire_trace' not in options:
+        options['wire_trace'] = args.global_wire_trace  # drive-bridge --wire-trace F COMMAND
     check_bus_options(options, from_file)
     bus = {key: value for key, value in from_file.items() if key != 'devices'}
     bus.update(options)

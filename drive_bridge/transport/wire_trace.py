@@ -72,8 +72,8 @@ def trace_format(path: str) -> str:
     """Return 'pcapng' or 'text' by ``path``'s extension; raise ConfigError for others."""
     extension = os.path.splitext(path)[1].lower()
     if extension not in FORMATS:
-        raise ConfigError(f'wire trace {path!r}: name it *.pcapng (Wireshark) or *.txt / *.log '
-                          '(text, one line a frame)')
+        raise ConfigError(f'wire trace {path!r}: name the file *.pcapng (Wireshark) or *.txt / '
+                          '*.log (text, one line a frame)')
     return FORMATS[extension]
 
 

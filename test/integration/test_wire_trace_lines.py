@@ -161,9 +161,9 @@ def test_ap_ascii_through_drive_bridge_names_the_lua_dissector(tmp_path):
     server.start()
     path = tmp_path / 'ap.pcapng'
     try:
-        code = main(['status', '--protocol', 'ap_ascii', '--port', pty_path, '--family', 'mcd',
-                     '--model', 'mcd3000', '--address', '20', '--quiet', '--wire-trace',
-                     str(path)], out=io.StringIO())
+        code = main(['--wire-trace', str(path), 'status', '--protocol', 'ap_ascii', '--port',
+                     pty_path, '--family', 'mcd', '--model', 'mcd3000', '--address', '20',
+                     '--quiet'], out=io.StringIO())  # the option before the command too
     finally:
         server.stop()
     assert code == 0

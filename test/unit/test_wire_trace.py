@@ -5,6 +5,7 @@ import io
 import logging
 import os
 
+from drive_bridge.config import build_config
 from drive_bridge.errors import ConfigError
 from drive_bridge.protocol.crc import append_crc
 from drive_bridge.tools import trace_text
@@ -30,8 +31,19 @@ def test_the_format_is_the_extension_s_and_others_are_refused_in_one_line():
     assert trace_format('line.TXT') == 'text'
     assert trace_format('line.log') == 'text'
     for name in ('line.pcap', 'line', 'line.cap'):
-        with pytest.raises(ConfigError, match=r'name it \*\.pcapng .* or \*\.txt / \*\.log'):
+        with pytest.raises(ConfigError, match=r'name the file \*\.pcapng .* or \*\.txt / \*\.log'):
             trace_format(name)
+
+
+def test_the_bus_parameters_give_the_trace_settings_and_a_bad_name_is_refused():
+    devices = {'starter': {'family': 'mcd', 'address': 20}}
+    bus = {'devices': ['starter'], 'wire_trace': '/tmp/line.txt', 'wire_trace_max_mb': 2.5,
+           'wire_trace_files': 3}
+    assert build_config(bus, devices).trace == TraceSettings('/tmp/line.txt', 2.5, 3)
+    assert not build_config({'devices': ['starter']}, devices).trace.enabled
+    with pytest.raises(ConfigError, match=r"^parameter 'wire_trace': wire trace 'line.pcap': "
+                                          r'name the file \*\.pcapng'):
+        build_config(dict(bus, wire_trace='line.pcap'), devices)
 
 
 def test_the_comment_is_outcome_end_and_unit_words():
