@@ -7,6 +7,7 @@ dissectors, the FC protocol and AP ASCII named for the Lua dissectors with their
 direction, and each outcome the simulator's faults make.
 """
 
+import argparse
 import io
 import os
 import signal
@@ -157,6 +158,8 @@ def test_the_fc_protocol_through_drive_bridge_names_the_lua_dissector_with_its_b
 
 def test_ap_ascii_through_drive_bridge_names_the_lua_dissector(tmp_path):
     server = make_ap_ascii_server({20: 'mcd3000'})
+    tap = sim_cli.wire_tap(server, argparse.Namespace(
+        wire_trace=str(tmp_path / 'sim.pcapng'), link='ap', protocol='ap_ascii'))
     pty_path = server.open_pty()
     server.start()
     path = tmp_path / 'ap.pcapng'
@@ -166,9 +169,14 @@ def test_ap_ascii_through_drive_bridge_names_the_lua_dissector(tmp_path):
                      '--quiet'], out=io.StringIO())  # the option before the command too
     finally:
         server.stop()
+        tap.close()
     assert code == 0
     rows = pdu_rows(path)
     assert {row[1] for row in rows} == {'danfoss_ap_ascii'}
+    sim_rows = pdu_rows(tmp_path / 'sim.pcapng')  # the simulator's side: the same bytes
+    for sent, received in (('0', '1'), ('1', '0')):  # (a read may hold part of a fragment)
+        assert ''.join(row[2] for row in rows if row[0] == sent) == \
+            ''.join(row[2] for row in sim_rows if row[0] == received)
     assert [row[0] for row in rows[:2]] == ['0', '1']
     assert rows[0][2].startswith('04')  # EOT: the address fragment
     assert rows[1][2] == '06'  # the ACK
@@ -199,12 +207,12 @@ def test_the_simulator_s_trace_holds_the_requests_inbound_and_matches_the_bridge
         sim.send_signal(signal.SIGTERM)
         sim.wait(timeout=30)
     sim_rows = tshark_fields(sim_trace, 'frame.p2p_dir', 'mbrtu.unit_id', 'frame.interface_name')
-    assert sim_rows and {row[1] for row in sim_rows} == {'20'}
-    assert sim_rows[0][0] == '1' and sim_rows[1][0] == '0'  # a request comes in first
+    assert {('1', '20'), ('0', '20')} <= {(row[0], row[1]) for row in sim_rows}
+    assert sim_rows[0][:2] == ['1', '20']  # a request comes in first
     assert {row[2] for row in sim_rows} == {pty_path}
-    bridge = [(record.inbound, record.data) for _, record in
-              trace_text.records(bridge_trace.read_bytes())]
-    simulated = [(not record.inbound, record.data) for _, record in
-                 trace_text.records(sim_trace.read_bytes())]
-    assert bridge == simulated  # each side's frames, the direction seen from the other
+    bridge = [record for _, record in trace_text.records(bridge_trace.read_bytes())]
+    simulated = [record for _, record in trace_text.records(sim_trace.read_bytes())]
+    for inbound in (False, True):  # the same bytes each way, the direction seen from the other
+        assert b''.join(record.data for record in bridge if record.inbound == inbound) == \
+            b''.join(record.data for record in simulated if record.inbound != inbound)
     assert os.path.getsize(sim_trace) > 0
