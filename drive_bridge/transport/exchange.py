@@ -33,6 +33,9 @@ a request only when it can be nothing else:
 
 The transports (:mod:`.serial_rtu`, :mod:`.ap_ascii`, :mod:`.fc_protocol`) build the request
 bytes and say whether a frame answers their request; the :class:`ByteLine` moves bytes.
+With a wire trace on (:meth:`LineDiscipline.start_trace`), the line is wrapped so that each
+request and each chunk read is noted, and each window and quarantine hands its frames and
+their outcomes to the trace (:mod:`.line_trace`); with none, nothing of it runs.
 """
 
 import time
