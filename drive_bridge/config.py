@@ -25,6 +25,7 @@ from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.line_transport import line_timing
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.protocols import protocol_settings, PROTOCOLS
+from drive_bridge.transport.wire_trace import trace_format, TraceSettings
 
 GUARD_DEFAULTS = ', '.join(f'{name} {spec.reply_guard_s:g} s' for name, spec in PROTOCOLS.items()
                            if spec.reply_guard_s)
@@ -67,6 +68,15 @@ BUS_SETTINGS: Tuple[Setting, ...] = (
     Setting('command_deadline', float, 2.0,
             'seconds a command may wait for the bus; one not on the wire by then is dropped, '
             'answered as failed and never sent', low=0.1, high=30.0),
+    Setting('wire_trace', str, '',
+            'file to trace every frame of the bus to, both ways with times and outcomes: '
+            'a .pcapng file (Wireshark) or .txt / .log (text, one line a frame); empty = off'),
+    Setting('wire_trace_max_mb', float, 10.0,
+            'megabytes a wire trace file may reach before it is renamed <name>.1.<ext> and a '
+            'new one begins', low=0.01, high=100000.0),
+    Setting('wire_trace_files', int, 5,
+            'wire trace files kept, the current one included (the oldest is dropped)',
+            low=1, high=1000),
 ) + protocol_settings()
 
 COMMON_DEVICE_SETTINGS: Tuple[Setting, ...] = (
@@ -211,10 +221,11 @@ class BridgeConfig:
     devices: List[DeviceConfig] = field(default_factory=list)
     diagnostics_period_s: float = 1.0
     protocol_options: Dict[str, Any] = field(default_factory=dict)
+    trace: TraceSettings = field(default_factory=TraceSettings)
 
     def make_transport(self):
-        """Return the transport of this bus."""
-        return make_transport(self.link, self.protocol_options)
+        """Return the transport of this bus (tracing the wire if ``wire_trace`` is set)."""
+        return make_transport(self.link, self.protocol_options, self.trace)
 
     def device(self, name: str) -> DeviceConfig:
         """Return the device called ``name``; raise ConfigError naming the ones there are."""
@@ -253,7 +264,8 @@ def build_config(bus_values: Mapping[str, Any],
                        command_deadline_s=bus['command_deadline'],
                        transaction_timeout_s=bus['timeout'],
                        slow_reply_s=bus['timeout'] / 2)
-    config = BridgeConfig(link, timing, devices, bus['diagnostics_period'], options)
+    config = BridgeConfig(link, timing, devices, bus['diagnostics_period'], options,
+                          _trace_settings(bus))
     check_comms_timeouts(config)
     return config
 
@@ -313,6 +325,17 @@ def check_comms_timeouts(config: BridgeConfig) -> None:
                 f'the line works: {gap.explain()} ({times}): set comms_timeout to at least '
                 f'{gap.advised_s:g} s (a margin of 1 s), or raise poll_rate, lower timeout or '
                 "retries, or lower the other devices' poll_rate")
+
+
+def _trace_settings(bus: Mapping[str, Any]) -> TraceSettings:
+    """Return the wire trace settings; refuse a file name of no known format."""
+    trace = TraceSettings(bus['wire_trace'], bus['wire_trace_max_mb'], bus['wire_trace_files'])
+    if trace.enabled:
+        try:
+            trace_format(trace.path)
+        except ConfigError as error:
+            raise ConfigError(f"parameter 'wire_trace': {error}") from None
+    return trace
 
 
 def check_bus_keys(bus_values: Mapping[str, Any]) -> None:

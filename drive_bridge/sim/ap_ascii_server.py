@@ -69,10 +69,13 @@ class PtyWriter:
     def __init__(self, master: int):
         self.master = master
         self.closed = False
+        self.tap = None  # the wire trace's WireTap, or None
 
     def write(self, reply: bytes) -> None:
         """Write a reply; wait while the pty is full (another writer on the line), never die."""
         deadline = time.monotonic() + 1.0
+        if self.tap is not None:
+            self.tap.frame(False, reply)
         while reply and time.monotonic() < deadline:
             try:
                 reply = reply[os.write(self.master, reply):]
@@ -107,6 +110,7 @@ class ApAsciiSimServer:
         self._last_byte_s = 0.0
         self._running = False
         self._thread: Optional[threading.Thread] = None
+        self.tap = None  # set before start: the wire trace's WireTap
 
     def inject(self, unit: int, fault: str, count: int = 1, fragment: str = 'address') -> None:
         """
@@ -125,6 +129,7 @@ class ApAsciiSimServer:
         self._pty = PtyLink(link_path)
         self._master = self._pty.master
         self._stream = PtyWriter(self._master)
+        self._stream.tap = self.tap
         self.pty_path = self._pty.path
         return self.pty_path
 
@@ -155,6 +160,8 @@ class ApAsciiSimServer:
                     data = os.read(self._master, 1024)
                 except OSError:
                     data = b''
+                if data and self.tap is not None:
+                    self.tap.frame(True, data)
                 if data:
                     self._buffer += data
                     self._last_byte_s = now

@@ -37,6 +37,7 @@ from typing import Dict, List, Optional
 
 from drive_bridge.console import OneLineParser, plain_text
 from drive_bridge.devices import mcd
+from drive_bridge.errors import ConfigError
 from drive_bridge.sim.adapter import AdapterBehaviour, AdapterRelay, parse_device_line, \
     SerialSetting
 from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
@@ -48,6 +49,8 @@ from drive_bridge.sim.fc_protocol_server import FcProtocolSimServer
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 from drive_bridge.sim.modbus_server import ModbusSimServer, WireTiming
 from drive_bridge.sim.wire_pacer import LineTiming, MASTER, SLAVE, WirePacer
+from drive_bridge.sim.wire_tap import WireTap
+from drive_bridge.transport.wire_trace import TraceSettings, WireTrace
 
 
 def parse_device(text: str) -> tuple:
@@ -162,7 +165,30 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar='SECONDS',
                         help="the master's timeout (the bridge's 'timeout'), for 'late' "
                              'replies')
+    parser.add_argument('--wire-trace', default='', metavar='FILE',
+                        help='write every request read and reply written to FILE, a '
+                             '.pcapng (Wireshark) or .txt / .log (text); see docs/wire_trace.md')
     return parser
+
+
+TRACE_PROTOCOLS = {'modbus': 'modbus_rtu', 'ap_ascii': 'ap_ascii', 'fc_protocol': 'fc_protocol'}
+
+
+def wire_tap(server, args: argparse.Namespace) -> Optional[WireTap]:
+    """Return the WireTap of ``--wire-trace`` set on ``server`` (before its endpoints), or None."""
+    if not args.wire_trace:
+        return None
+    try:
+        trace = WireTrace(TraceSettings(args.wire_trace), args.link or 'sim',
+                          TRACE_PROTOCOLS[args.protocol], server_side=True)
+    except ConfigError as error:
+        raise SystemExit(f'drive_bridge_sim: --wire-trace: {error}') from None
+    tap = WireTap(trace)
+    if isinstance(server, ApAsciiSimServer):
+        server.tap = tap
+    else:
+        server.line.tap = tap
+    return tap
 
 
 def parse_pace(text: str, protocol: str = 'modbus') -> LineTiming:
@@ -354,6 +380,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     pacer = _pacer(args)
     relay = _relay(args)
     server = build_server(args)
+    tap = wire_tap(server, args)
+    path = ''
     if not args.no_pty:
         path = server.open_pty('' if pacer or relay else args.link)
         if pacer:
@@ -368,6 +396,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     if args.tcp is not None and isinstance(server, ModbusSimServer):
         print(f'tcp: {args.host}:{server.open_tcp(args.host, args.tcp, args.framing)} '
               f'({args.framing})', flush=True)
+    if tap is not None and not args.link:
+        tap.trace.form.interface = path or f'{args.host}:{getattr(server, "tcp_port", 0)}'
     server.start()
     if pacer:
         pacer.start()
@@ -387,6 +417,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         pacer.stop()
         print(describe_line(pacer), flush=True)
     server.stop()
+    if tap is not None:
+        tap.close()
     return 0
 
 

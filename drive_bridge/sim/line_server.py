@@ -37,6 +37,7 @@ class Connection:
         self.first_byte_s = 0.0  # when the buffer's first byte arrived
         self.last_byte_s = 0.0
         self.closed = False  # set when the line stops watching it: nothing more is written
+        self.tap = None  # the wire trace's WireTap (drive_bridge_sim --wire-trace), or None
 
     def fileno(self) -> int:
         """Return the stream's file descriptor."""
@@ -45,12 +46,17 @@ class Connection:
     def read(self) -> bytes:
         """Return what the stream has (b'' when it is closed or failed)."""
         try:
-            return os.read(self.io, 4096) if isinstance(self.io, int) else self.io.recv(4096)
+            data = os.read(self.io, 4096) if isinstance(self.io, int) else self.io.recv(4096)
         except OSError:
             return b''
+        if data and self.tap is not None:
+            self.tap.frame(True, data, self.framing)
+        return data
 
     def write(self, data: bytes) -> None:
         """Send ``data``; a stream that has gone is ignored (the master sees silence)."""
+        if self.tap is not None:
+            self.tap.frame(False, data, self.framing)
         try:
             if isinstance(self.io, int):
                 os.write(self.io, data)
@@ -89,6 +95,7 @@ class LineServer:
         self._loop_actions: List[tuple] = []
         self._unplugged_links: List[str] = []
         self.writes = ScheduledWrites(clock)
+        self.tap = None  # set before start: every connection's bytes go to this WireTap
 
     # -- replies (on the serving thread) ------------------------------------------------
     def send(self, connection: Connection, data: bytes, due_s: float = 0.0) -> None:
@@ -109,7 +116,9 @@ class LineServer:
         pty = PtyLink(link_path)
         self._ptys.append(pty)
         self.pty_path = pty.path
-        self._selector.register(pty.master, selectors.EVENT_READ, Connection(pty.master, 'rtu'))
+        connection = Connection(pty.master, 'rtu')
+        connection.tap = self.tap
+        self._selector.register(pty.master, selectors.EVENT_READ, connection)
         return self.pty_path
 
     @property
@@ -230,7 +239,9 @@ class LineServer:
             client, _ = key.fileobj.accept()
             client.setblocking(True)
             client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._selector.register(client, selectors.EVENT_READ, Connection(client, key.data[1]))
+            connection = Connection(client, key.data[1])
+            connection.tap = self.tap
+            self._selector.register(client, selectors.EVENT_READ, connection)
             return
         connection: Connection = key.data
         data = connection.read()

@@ -46,6 +46,7 @@ from drive_bridge.tools.cli_status import command_monitor, command_status
 from drive_bridge.tools.cli_target import CliError, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE
 from drive_bridge.tools.cli_wireshark import add_wireshark_command
 from drive_bridge.tools.doctor import add_options as add_doctor_options, command_doctor
+from drive_bridge.tools.trace_text import command_trace_text
 from drive_bridge.transport.protocols import PROTOCOLS
 
 DESCRIPTION = """\
@@ -73,6 +74,7 @@ EXAMPLES = {
     'monitor': 'drive-bridge monitor --config config/mixed_bus.yaml --device feeder '
                '--count 3',
     'doctor': 'drive-bridge doctor --port /dev/ttyUSB0 --baudrate 19200 --address 3',
+    'trace-text': 'drive-bridge trace-text line.pcapng > line.txt',
 }
 
 SUBCOMMANDS = {
@@ -126,6 +128,11 @@ SUBCOMMANDS = {
     'monitor': ('live decoded status (Ctrl-C ends)',
                 'Poll the device once a period and print one line each time, until Ctrl-C '
                 '(exit status 130) or --count polls. Reads only.'),
+    'trace-text': ('print a pcapng wire trace as text, one line a frame',
+                   'Print a wire trace written to a .pcapng file (the wire_trace parameter, '
+                   '--wire-trace) as the text form: time, line, TX or RX, the bytes, the '
+                   'outcome, the duration and the unit; to paste into an issue. Opens no '
+                   'port.'),
 }
 
 
@@ -138,6 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
                                          ('scan', 'doctor', 'get', 'set', 'backup',
                                           'restore'))
         + '\n\n"drive-bridge COMMAND --help" tells more of each command.')
+    parser.add_argument('--wire-trace', dest='global_wire_trace', metavar='FILE',
+                        help="trace every frame of the command's bus to FILE (as each "
+                        "command's --wire-trace)")
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     add = _subcommand_adder(commands)
     scan = add('scan', command_scan, device=False)
@@ -168,6 +178,13 @@ def build_parser() -> argparse.ArgumentParser:
     monitor.add_argument('--count', type=poll_count, default=0,
                          help='stop after N polls (0: never)')
     add_wireshark_command(commands)
+    summary, description = SUBCOMMANDS['trace-text']
+    text = commands.add_parser('trace-text', help=summary,
+                               description=textwrap.fill(description, 79),
+                               epilog=f'example:\n  {EXAMPLES["trace-text"]}',
+                               formatter_class=argparse.RawDescriptionHelpFormatter)
+    text.set_defaults(function=command_trace_text)
+    text.add_argument('file', help='a .pcapng wire trace')
     return parser
 
 
@@ -217,6 +234,9 @@ def _subcommand_adder(commands):
                          help='0 (default): 2 with no parity, 1 with parity')
         bus.add_argument('--timeout', type=number_argument,
                          help='seconds per transaction (default 0.5)')
+        bus.add_argument('--wire-trace', dest='wire_trace', metavar='FILE',
+                         help='write every frame both ways to FILE, a .pcapng (Wireshark) or '
+                         '.txt / .log (text); see docs/wire_trace.md')
         sub.add_argument('--quiet', action='store_true', help='no progress bar and no notes '
                          '(such as the pty note); warnings and errors still print')
         if device:

@@ -19,7 +19,7 @@ from drive_bridge.transport.protocols import PROTOCOLS
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 BUS_OPTIONS = ('protocol', 'port', 'host', 'tcp_port', 'baudrate', 'parity', 'stopbits',
-               'timeout')
+               'timeout', 'wire_trace')
 DEVICE_OPTIONS = ('family', 'model', 'address', 'mcd_interface')
 ADDRESSES = (1, 247)  # what any device address may be (the family or protocol may narrow it)
 
@@ -69,6 +69,8 @@ def file_block(args: argparse.Namespace) -> Tuple[Dict[str, Any], Dict[str, Dict
 def bus_values(args: argparse.Namespace, from_file: Mapping[str, Any]) -> Dict[str, Any]:
     """Return the bus settings: the file's, with the options given winning."""
     options = given(args, BUS_OPTIONS)
+    if getattr(args, 'global_wire_trace', None) and 'wire_trace' not in options:
+        options['wire_trace'] = args.global_wire_trace  # drive-bridge --wire-trace F COMMAND
     check_bus_options(options, from_file)
     bus = {key: value for key, value in from_file.items() if key != 'devices'}
     bus.update(options)

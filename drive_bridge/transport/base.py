@@ -19,6 +19,8 @@ from drive_bridge.protocol.framing import Frame
 from drive_bridge.protocol.requests import Request
 from drive_bridge.transport.link import LinkSettings
 
+DEV = '/dev/'  # left out of a serial port's name in a wire trace
+
 
 @dataclass(frozen=True)
 class LineTiming:
@@ -115,3 +117,24 @@ class Transport(ABC):
     def describe(self) -> str:
         """Return the link in words, for messages."""
         return self.settings.describe()
+
+    def start_trace(self, trace) -> None:
+        """
+        Write every frame of the link to a wire trace (``trace``: its TraceSettings).
+
+        Call before the first transaction, from the thread that will own the link.
+        """
+        raise NotImplementedError(f'{type(self).__name__} cannot trace its wire')
+
+
+def trace_interface(settings: LinkSettings) -> str:
+    """Return the line's name in a wire trace: the port without /dev/, or host:port."""
+    if settings.is_serial:
+        port = settings.port
+        return port[len(DEV):] if port.startswith(DEV) and len(port) > len(DEV) else port
+    return f'{settings.host}:{settings.tcp_port}'
+
+
+def trace_protocol(settings: LinkSettings) -> str:
+    """Return the protocol whose dissector decodes the link's frames in a trace."""
+    return 'modbus_rtu' if settings.protocol == 'rtu_over_tcp' else settings.protocol

@@ -18,6 +18,7 @@ from drive_bridge.transport.base import Transport
 from drive_bridge.transport.fc_protocol import FcProtocolTransport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
+from drive_bridge.transport.wire_trace import TraceSettings
 
 TransportFactory = Callable[[LinkSettings, Mapping[str, Any]], Transport]
 
@@ -52,6 +53,10 @@ TRANSPORTS: Dict[str, TransportFactory] = {
 }
 
 
-def make_transport(link: LinkSettings, options: Optional[Mapping[str, Any]] = None) -> Transport:
-    """Return the transport of ``link`` with the protocol's ``options``."""
-    return TRANSPORTS[link.protocol](link, options or {})
+def make_transport(link: LinkSettings, options: Optional[Mapping[str, Any]] = None,
+                   trace: Optional[TraceSettings] = None) -> Transport:
+    """Return the transport of ``link`` with the protocol's ``options``, traced if asked."""
+    transport = TRANSPORTS[link.protocol](link, options or {})
+    if trace is not None and trace.enabled:
+        transport.start_trace(trace)
+    return transport

@@ -33,6 +33,9 @@ a request only when it can be nothing else:
 
 The transports (:mod:`.serial_rtu`, :mod:`.ap_ascii`, :mod:`.fc_protocol`) build the request
 bytes and say whether a frame answers their request; the :class:`ByteLine` moves bytes.
+With a wire trace on (:meth:`LineDiscipline.start_trace`), the line is wrapped so that each
+request and each chunk read is noted, and each window and quarantine hands its frames and
+their outcomes to the trace (:mod:`.line_trace`); with none, nothing of it runs.
 """
 
 import time
@@ -41,7 +44,9 @@ from typing import Any, Callable, Dict, List, Optional, Protocol
 from drive_bridge.errors import AmbiguousReply, LineBabble, TransportError
 from drive_bridge.protocol.framing import Frame, Framer, frames_in
 from drive_bridge.transport.base import LineTiming, TransactionReport
+from drive_bridge.transport.line_trace import LineTracer, TracedLine
 from drive_bridge.transport.reply_window import Accept, ReplyWindow, Shaped
+from drive_bridge.transport.wire_trace import WireTrace
 
 MAX_READ_BYTES = 512  # one read of whatever is there
 MAX_SCANNED_BYTES = 4096  # discarded bytes looked through for whole frames, at most
@@ -95,6 +100,12 @@ class LineDiscipline:
         self._answered_badly = False  # the last window: a corrupt answer-shaped frame
         self._owed_before = False  # the unit owed a reply when this transaction began
         self._answer_s = 0.0  # when the last answer of this transaction came
+        self.tracer: Optional[LineTracer] = None  # the wire trace's, when one is on
+
+    def start_trace(self, trace: WireTrace) -> None:
+        """Trace every request and every frame read from now on (:mod:`.line_trace`)."""
+        self.tracer = LineTracer(trace, self.framer, self.clock, self.timing.echo)
+        self.line = TracedLine(self.line, self.tracer, self.clock)
 
     def key(self, unit: Optional[int]) -> Optional[int]:
         """Return the key ``unit`` owes under (the line's, where frames name no unit)."""
@@ -139,10 +150,17 @@ class LineDiscipline:
                 window.read_echo(request, deadline)
                 if self._names_unit(window.late):  # came before the request: the held one
                     owed = None
-            return window.read(self._unit, accept, len(request), deadline, owed, shaped,
-                               acknowledges)
+            value = window.read(self._unit, accept, len(request), deadline, owed, shaped,
+                                acknowledges)
+        except BaseException as error:
+            if self.tracer is not None:
+                self.tracer.window(self._unit, error)
+            raise
         finally:
             self._take(window)
+        if self.tracer is not None:
+            self.tracer.window(self._unit, None)
+        return value
 
     def send_only(self, request: bytes) -> None:
         """Send ``request`` that nobody answers (a broadcast); read the adapter's echo."""
@@ -150,12 +168,16 @@ class LineDiscipline:
         self._first_window, self._deadline = False, sent_s + self.timing.timeout_s
         self.line.write(request, self._deadline)
         self.on_request_sent()
-        if self.timing.echo:
-            window = ReplyWindow(self.line, self.framer, self.timing, sent_s, self.clock)
-            try:
-                window.read_echo(request, self._deadline)
-            finally:
-                self._take(window)
+        try:
+            if self.timing.echo:
+                window = ReplyWindow(self.line, self.framer, self.timing, sent_s, self.clock)
+                try:
+                    window.read_echo(request, self._deadline)
+                finally:
+                    self._take(window)
+        finally:
+            if self.tracer is not None:
+                self.tracer.window(self._unit, None, broadcast=True)
 
     def failed(self, error: TransportError) -> None:
         """
@@ -193,6 +215,18 @@ class LineDiscipline:
 
     # -- quarantine ---------------------------------------------------------------------
     def quarantine(self, since_s: float, last_byte_s: Optional[float] = None) -> None:
+        """Quarantine the line (:meth:`_quarantine`); trace what it discarded, if tracing."""
+        if self.tracer is None:
+            self._quarantine(since_s, last_byte_s)
+            return
+        try:
+            self._quarantine(since_s, last_byte_s)
+        except LineBabble:
+            self.tracer.discarded('babble')
+            raise
+        self.tracer.discarded('quarantined')
+
+    def _quarantine(self, since_s: float, last_byte_s: Optional[float] = None) -> None:
         """
         Read and discard input until the guard after ``since_s`` and a silence have passed.
 

@@ -16,10 +16,12 @@ from typing import Any, Callable, ClassVar, Optional, Tuple
 from drive_bridge.errors import BadFrame, LinkDown, Nak, NoResponse, TransportError
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.framing import Framer
-from drive_bridge.transport.base import LineTiming, TransactionReport, Transport
+from drive_bridge.transport.base import (
+    LineTiming, trace_interface, trace_protocol, TransactionReport, Transport)
 from drive_bridge.transport.exchange import ByteLine, LineDiscipline
 from drive_bridge.transport.link import LinkSettings, port_missing, pty_device, URL_PREFIXES
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialLine
+from drive_bridge.transport.wire_trace import TraceSettings, WireTrace
 import serial
 
 # The shortest silence that ends a quarantine: USB adapters deliver bytes in batches of up to
@@ -102,6 +104,11 @@ class LineTransport(Transport):
     def close(self) -> None:
         """Close the line (idempotent)."""
         self.line.close()
+
+    def start_trace(self, trace: TraceSettings) -> None:
+        """Trace every frame the line discipline sends and reads (see Transport)."""
+        self.discipline.start_trace(WireTrace(trace, trace_interface(self.settings),
+                                              trace_protocol(self.settings)))
 
     def execute(self, unit: int, request) -> Any:
         """Run one request with device ``unit`` under the line discipline; see Transport."""

@@ -22,8 +22,10 @@ from typing import List, Optional
 from drive_bridge.errors import BadFrame, DeviceException, LinkDown, NoResponse
 from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
-from drive_bridge.transport.base import Transport
+from drive_bridge.transport.base import trace_interface, Transport
 from drive_bridge.transport.link import LinkSettings  # noqa: F401 - re-exported
+from drive_bridge.transport.packet_trace import PacketTracer
+from drive_bridge.transport.wire_trace import TraceSettings, WireTrace
 import pymodbus
 from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -45,6 +47,7 @@ class ModbusTransport(Transport):
     def __init__(self, settings: LinkSettings):
         super().__init__(settings)
         self._client = None
+        self._tracer: Optional[PacketTracer] = None  # the wire trace's, when one is on
 
     # -- connection ---------------------------------------------------------------------
     @property
@@ -59,7 +62,11 @@ class ModbusTransport(Transport):
         common = {'timeout': settings.timeout_s, 'retries': 0}
         if not _HAS_TRACE_PACKET:  # pymodbus 3.6: no retry on empty, no reconnect delay
             common.update(retry_on_empty=False, reconnect_delay=0)
+        elif self._tracer is not None:
+            common.update(trace_packet=self._tracer.packet)
         client = ModbusTcpClient(host=settings.host, port=settings.tcp_port, **common)
+        if self._tracer is not None and not _HAS_TRACE_PACKET:
+            self._tracer.wrap(client)
         try:
             ok = client.connect()
         except (OSError, ModbusException) as error:  # pymodbus 3.6 lets some through
@@ -79,6 +86,11 @@ class ModbusTransport(Transport):
             except (OSError, ModbusException):
                 pass
 
+    def start_trace(self, trace: TraceSettings) -> None:
+        """Trace the ADUs pymodbus sends and receives (:mod:`.packet_trace`)."""
+        self._tracer = PacketTracer(WireTrace(trace, trace_interface(self.settings),
+                                              'modbus_tcp'))
+
     # -- transactions -------------------------------------------------------------------
     def execute(self, unit: int, transaction) -> Optional[list]:
         """Run one transaction with device ``unit``; return registers or coils read, or None."""
@@ -88,7 +100,15 @@ class ModbusTransport(Transport):
         if handler is None:
             raise TypeError(f'unsupported transaction {transaction!r}')
         self.last_recovered = {}
-        return self._run(handler, unit, transaction)
+        if self._tracer is None:
+            return self._run(handler, unit, transaction)
+        try:
+            result = self._run(handler, unit, transaction)
+        except Exception as error:
+            self._tracer.end(unit, error)
+            raise
+        self._tracer.end(unit, None)
+        return result
 
     def _run(self, handler, unit: int, transaction) -> Optional[list]:
         """Run the transaction through pymodbus; raise its failure as a typed error."""
