@@ -101,7 +101,7 @@ def settings_table(key: str, notes: Dict[str, Any]) -> str:
     for setting in group.settings:
         meaning = plain(setting.description)
         if notes.get(setting.name):
-            meaning += ' ' + cell_markdown(str(notes[setting.name]))
+            meaning = meaning.rstrip('.') + '. ' + cell_markdown(str(notes[setting.name]))
         default = reference.default_of(setting)
         allowed = reference.allowed_of(setting)
         rows.append((code(group.prefix + setting.name), reference.type_of(setting),
