@@ -24,12 +24,10 @@ from drive_bridge.tools.cli import main
 from drive_bridge.transport.engines import make_transport
 from drive_bridge.transport.link import LinkSettings
 from drive_bridge.transport.wire_trace import TraceSettings
-from pty_witness import run_unless_a_pty_lagged
 import pytest
-from trace_helpers import needs_tshark, outcomes, tshark_fields
+from trace_helpers import needs_tshark, on_a_pty, outcomes, tshark_fields
 
 TIMEOUT_S = 0.5
-PTY_MARGIN_S = 0.4  # a pty lag this long could turn a reply into a timeout
 READ = ReadRegisters(2, 2)
 pytestmark = needs_tshark
 
@@ -48,17 +46,6 @@ def attempt(transport, unit=20):
     except Exception as error:  # noqa: B902 - every failure is an outcome here
         return getattr(error, 'kind', type(error).__name__)
     return 'ok'
-
-
-def on_a_pty(test, tmp_path) -> None:
-    """Run ``test(directory)``, again only if it failed while a pty lagged (a new directory)."""
-    runs = iter(range(1, 4))
-    run_unless_a_pty_lagged(lambda: test(_fresh(tmp_path / f'run{next(runs)}')), PTY_MARGIN_S)
-
-
-def _fresh(directory):
-    directory.mkdir()
-    return directory
 
 
 def test_modbus_rtu_on_a_pty_ok_crc_timeout_late_and_quarantined_frames(tmp_path):

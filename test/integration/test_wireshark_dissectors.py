@@ -9,7 +9,6 @@ telegrams quoted in ``fc_telegram.py``, the AP ASCII start command of manual 000
 import io
 import os
 import random
-import shutil
 import struct
 import subprocess
 
@@ -21,10 +20,9 @@ from drive_bridge.protocol.words import bytes_to_registers
 from drive_bridge.tools import cli
 from drive_bridge.tools.cli_wireshark import dissector_files
 import pytest
+from trace_helpers import needs_tshark, TSHARK, tshark
 
-TSHARK = shutil.which('tshark')
-pytestmark = pytest.mark.skipif(
-    TSHARK is None, reason='tshark is not installed: apt-get install tshark (.ci/run does)')
+pytestmark = needs_tshark
 
 T0_NS = 1_764_000_000_000_000_000
 LUA = {entry.name[:-len('.lua')]: str(entry) for entry in dissector_files()}
@@ -41,30 +39,6 @@ def write_trace(path, dissector, frames):
                 0, T0_NS + index * 1_000_000,
                 pcapng.exported_pdu(dissector, payload, ports[0] if ports else None),
                 inbound))
-
-
-def tshark(path, script, fields, *options, display_filter=''):
-    """
-    Return the rows of ``fields`` (a dict per frame).
-
-    Fail on any message on stderr (a syntax error in a script leaves the exit status 0) and
-    on a Lua error while a frame was dissected (an expert info in the frame).
-    """
-    command = [TSHARK, '-n', '-X', f'lua_script:{script}', '-r', str(path), *options,
-               '-T', 'fields', '-E', 'separator=/t', '-E', 'occurrence=a',
-               '-E', 'aggregator=;']
-    if display_filter:
-        command += ['-Y', display_filter]
-    for field in [*fields, '_ws.expert.message']:
-        command += ['-e', field]
-    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
-    problems = [line for line in done.stderr.splitlines()
-                if 'running as user' not in line.lower()]
-    assert done.returncode == 0 and not problems, done.stderr
-    rows = [line.split('\t') for line in done.stdout.splitlines()]
-    lua_errors = [row[-1] for row in rows if 'Lua Error' in row[-1]]
-    assert lua_errors == [], lua_errors[:3]
-    return [dict(zip(fields, row)) for row in rows]
 
 
 def errors(path, script, *options):
