@@ -279,8 +279,7 @@ def line_times(link: LinkSettings, timing: BusTiming) -> LineTimes:
     answered_s = spec.poll_frame_chars * line.char_s + 2 * max(gap_s, line.gap_s) + \
         spec.reply_delay_s
     failed_s = line.timeout_s + line.guard_s + line.quarantine_silence_s + gap_s
-    return LineTimes(answered_s, failed_s, timing.retries, timing.offline_after,
-                     timing.backoff_initial_s)
+    return LineTimes(answered_s, failed_s, timing.retries, timing.offline_after)
 
 
 def keepalive_gaps(config: BridgeConfig) -> Dict[str, KeepaliveGap]:

@@ -8,25 +8,27 @@ force (the keepalive), so the timeout must be longer than the longest gap betwee
 polls while the line works: the drive answers, any other device may have stopped answering.
 :func:`keepalive_gap` computes that gap from the line's schedule; no I/O, no clock.
 
-How the bus schedules (:mod:`.polling`): one poll cycle at a time, earliest due first, and a
-device is next due one period after it was due (or at the start of its poll, if it is late).
-Between the start of the drive's poll and the start of its next one (due at most one period
-later) the line carries:
+How the bus schedules (:mod:`.polling`): one poll cycle at a time; the device whose
+``next_due_s`` is earliest begins next; as a poll begins, the device is made due one period
+after it was due, never before that moment (:meth:`.device.Health.schedule_next`). Hence a
+bound that holds whatever the other devices' rates: let the drive's poll begin at ``S1``
+(its keepalive write goes out first), so it is next due at ``D <= S1 + P`` (``P`` its
+period). A device that begins a poll at or after ``D`` is made due no sooner than that
+moment, so after ``D`` every other device begins at most one poll before the drive's next,
+besides the one in progress at ``D``, which began before it. The next write therefore goes
+out by ``S1 + max(own, P + c_max) + sum(c_j)``: ``own`` the drive's own poll, ``c_j`` the
+longest poll of device ``j``, ``c_max`` the longest of them (the poll in progress at ``D``).
 
-- the rest of the drive's own poll: its transactions, with up to ``min(retries,
-  offline_after - 1)`` lost reads sent again (more and it goes offline: no writes at all,
-  and its timeout may trip legitimately);
-- at most ``ceil(P / P_j) + 1`` polls of each other device ``j`` (a poll that starts first
-  must be due first: due times one period ``P_j`` apart, all within the drive's period
-  ``P``, and the one that was due at the start);
-- if device ``j`` has stopped answering: the failed transactions that take it offline
-  (``offline_after``, and its writes) or its probes (one a backoff, the first after
-  ``backoff_initial``: its writes and one read each), each a whole timeout, the guard after
-  it and a silence;
-- the identity reads and set-up writes of devices coming online.
+The longest poll of a device that stays online ("while the line works": the drive answers,
+any device may lose replies): each of its transactions answered after ``lost = min(retries,
+offline_after - 1)`` lost attempts (failures in a row below ``offline_after`` never take it
+offline, and an answer ends the row); of one that stopped answering: its writes and a read
+with its retries failed (no more than take it offline), or, offline, a probe (its writes and
+one read). Devices coming online add their identity reads and set-up writes.
 
 Not counted: what a user asks for (commands, parameter reads and writes: a few transactions
-each), a line that loses the drive's writes, and the host's own delays (the margin).
+each), a line that loses the drive's writes, replies slower than the protocol's reply delay
+(``slow_replies`` in ``/diagnostics``), and the host's own delays (the margin).
 """
 
 from dataclasses import dataclass
@@ -65,7 +67,6 @@ class LineTimes:
     failed_s: float
     retries: int = 2
     offline_after: int = 3
-    backoff_initial_s: float = 1.0
 
     def describe(self) -> str:
         """Return the two transaction times in words."""
@@ -99,47 +100,42 @@ def round_up(seconds: float, step: float = 0.1) -> float:
 def keepalive_gap(name: str, devices: Sequence[PollLoad], times: LineTimes) -> KeepaliveGap:
     """Return the longest gap between two polls of device ``name``; see the module docstring."""
     own = next(device for device in devices if device.name == name)
-    lost_reads = min(times.retries, times.offline_after - 1)
-    own_poll_s = own.transactions * times.answered_s + lost_reads * times.failed_s
+    own_poll_s = longest_online_poll_s(own, times)
+    others = [(other.name, longest_poll_s(other, times)) for other in devices
+              if other is not own]
+    in_progress_s = max((seconds for _, seconds in others), default=0.0)
     parts: List[Tuple[str, float]] = []
-    if own_poll_s > own.poll_period_s:
-        lost = f' with {lost_reads} lost reads' if lost_reads else ''
-        parts.append((f'its own poll{lost}', own_poll_s))
+    if own_poll_s > own.poll_period_s + in_progress_s:
+        retried = ', each read answered at the last retry' if lost_attempts(times) else ''
+        parts.append((f'its own poll{retried}', own_poll_s))
     else:
         parts.append(('its poll period', own.poll_period_s))
-    for other in devices:
-        if other is not own:
-            parts.extend(_other_device(own.poll_period_s, other, times))
+        if in_progress_s:
+            parts.append(('a poll under way as it falls due', in_progress_s))
+    parts.extend((f'a poll of {other}', seconds) for other, seconds in others)
     coming_online = sum(device.online for device in devices) * times.answered_s
     if coming_online:
         parts.append(('devices coming online', coming_online))
     return KeepaliveGap(name, sum(seconds for _, seconds in parts), tuple(parts))
 
 
-def _other_device(period_s: float, other: PollLoad,
-                  times: LineTimes) -> List[Tuple[str, float]]:
-    """Return what device ``other`` may put on the line within one period of the drive."""
-    polls = math.ceil(round(period_s / other.poll_period_s, 9)) + 1
-    answered_s = polls * other.transactions * times.answered_s
-    failed = silent_failures(period_s, other, polls, times)
-    return [(f'{other.name}: {polls} polls', answered_s),
-            (f'{failed} failed if {other.name} is silent', failed * times.failed_s)]
+def lost_attempts(times: LineTimes) -> int:
+    """Return how many attempts in a row a device may lose and stay online."""
+    return max(0, min(times.retries, times.offline_after - 1))
 
 
-def silent_failures(period_s: float, other: PollLoad, polls: int, times: LineTimes) -> int:
+def longest_online_poll_s(device: PollLoad, times: LineTimes) -> float:
+    """Return the longest poll of a device that stays online: each transaction retried."""
+    return device.transactions * (times.answered_s + lost_attempts(times) * times.failed_s)
+
+
+def longest_poll_s(device: PollLoad, times: LineTimes) -> float:
     """
-    Return the most failed transactions of a silent device within one period of the drive.
+    Return the longest poll of ``device``, online or not.
 
-    It goes offline after ``offline_after`` failed transactions in a row (its writes may
-    come on top: they are not retried), then is probed once a backoff, never sooner than
-    ``backoff_initial``. Each poll fails at most its writes and a read with its retries.
+    Silent, a poll fails its writes (not sent again) and a read with its retries, but no more
+    failures in a row than take it offline (``offline_after``, its writes on top); offline,
+    a probe fails its writes and one read.
     """
-    going_offline = times.offline_after + other.writes
-    per_poll = min(other.writes + times.retries + 1, going_offline)
-    probes = min(polls, math.ceil(round(period_s / times.backoff_initial_s, 9)) + 1)
-    probing = probes * (other.writes + 1)
-    # A probe comes a backoff after the failure that took the device offline: within one
-    # period only if the backoff is shorter than the period.
-    either = going_offline + probing if times.backoff_initial_s < period_s else \
-        max(going_offline, probing)
-    return min(polls * per_poll, either)
+    silent = min(device.writes + times.retries + 1, times.offline_after + device.writes)
+    return max(longest_online_poll_s(device, times), silent * times.failed_s)

@@ -37,15 +37,16 @@ INTERFACE = Setting(
     'mcd_interface', str, 'auto',
     'mcd: what sets the address: module = the MCD Modbus Module DIP switches (1-31), '
     'remote_operator = the Remote Operator, par. 2 (1-99); auto = remote_operator for an '
-    'mcd3000 (it has no Modbus Module), module for the others',
+    'mcd3000 (it has no Modbus Module) or a model not named (model auto), module for the '
+    'others',
     choices=('auto', MODULE, REMOTE_OPERATOR))
 
 
 def address_range(model: str, options: Mapping[str, Any]) -> Tuple[int, int, str]:
     """Return (low, high, what sets it, in words) of the addresses an MCD ``model`` may have."""
     interface = options.get(INTERFACE.name, 'auto')
-    if interface == 'auto':
-        interface = REMOTE_OPERATOR if model == 'mcd3000' else MODULE
+    if interface == 'auto':  # a model not named may be an MCD 3000: the wider range
+        interface = REMOTE_OPERATOR if model in ('mcd3000', 'auto') else MODULE
     return ADDRESS_RANGES[interface]
 
 

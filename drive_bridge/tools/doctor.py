@@ -12,6 +12,7 @@ written to a device. Exit status 0 when devices answered and nothing is wrong, 1
 """
 
 import argparse
+import math
 import os
 from typing import Callable, Dict, List, Optional, Sequence
 
@@ -46,7 +47,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
                        f'{",".join(map(str, found.SEARCH_BAUDRATES))})')
     group.add_argument('--no-search', dest='search', action='store_false',
                        help='check the port, adapter and line only')
-    group.add_argument('--listen', type=float, default=DEFAULT_LISTEN_S, metavar='SECONDS',
+    group.add_argument('--listen', type=listen_seconds, default=DEFAULT_LISTEN_S,
+                       metavar='SECONDS',
                        help=f'listen this long for babble (default {DEFAULT_LISTEN_S:g})')
     roots = parser.add_argument_group('roots (tests)')
     roots.add_argument('--sysfs-root', default=os.environ.get(SYSFS_ENV, SYSFS_ROOT),
@@ -162,3 +164,18 @@ def link_of(bus: Dict) -> LinkSettings:
     families = scan_families(bus) or ('fc',)
     return cfg.build_config(dict(bus, devices=['probe']),
                             {'probe': {'family': families[0], 'address': 1}}).link
+
+
+MAX_LISTEN_S = 60.0
+
+
+def listen_seconds(text: str) -> float:
+    """Return ``text`` as seconds to listen, 0-60 (an argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and 0.0 <= value <= MAX_LISTEN_S):
+        raise argparse.ArgumentTypeError(
+            f'{text!r}: give the seconds to listen, 0-{MAX_LISTEN_S:g}')
+    return value

@@ -10,12 +10,15 @@ types are skipped, a file that is no such pcapng gets one line saying so.
 """
 
 import argparse
+import math
 import struct
 from typing import Dict, Iterator, List, Optional, Tuple
 
 from drive_bridge.errors import ConfigError
 from drive_bridge.protocol import pcapng
 from drive_bridge.transport.wire_trace import text_line, TraceRecord
+
+MAX_DURATION_MS = 86_400_000.0  # a comment's end time beyond a day is no frame's
 
 Block = Tuple[int, bytes]  # (type, body)
 
@@ -65,8 +68,10 @@ def parse_comment(text: str) -> Tuple[str, float, Optional[int]]:
     """Return (outcome, duration in ms, unit) of a record's comment."""
     fields = dict(word.split('=', 1) for word in text.split() if '=' in word)
     unit = fields.get('unit')
-    duration = fields.get('end', '+0ms').lstrip('+').rstrip('ms') or '0'
-    return fields.get('outcome', ''), float(duration), int(unit) if unit else None
+    duration_ms = float(fields.get('end', '+0ms').lstrip('+').rstrip('ms') or '0')
+    if not math.isfinite(duration_ms) or abs(duration_ms) > MAX_DURATION_MS:
+        raise ValueError(f'a frame lasts {duration_ms:g} ms')
+    return fields.get('outcome', ''), duration_ms, int(unit) if unit else None
 
 
 def records(data: bytes) -> Iterator[Tuple[str, TraceRecord]]:

@@ -10,7 +10,10 @@ transaction's window, a quarantine), so a crash loses at most the transaction un
 
 Bounded: once a file would pass ``max_mb``, it is renamed ``trace.1.pcapng`` (the older
 ones shift up to ``trace.<files - 1>``, the oldest dropped) and a new one begins with its
-own headers, so each file opens alone; the file of a run before is shifted so too. A write
+own headers, so each file opens alone; the file of a run before (another process) is shifted
+so too. A trace reopened in the same process (a command's search that opens the port at each
+setting, a node configured again) goes on in the same file: a new pcapng section, which
+Wireshark reads as one capture. A write
 error (disk full, permission) disables the trace with one logged line; the bus goes on.
 Standard library only: the simulator writes its side of the line with the same class.
 """
@@ -25,6 +28,8 @@ from drive_bridge.errors import ConfigError
 from drive_bridge.protocol import pcapng
 
 LOG = logging.getLogger(__name__)
+# The trace files this process has written: a trace opened again goes on in its file.
+_WRITTEN_IN_THIS_PROCESS: set = set()
 FORMATS = {'.pcapng': 'pcapng', '.txt': 'text', '.log': 'text'}
 NOMINAL_MODBUS_TCP_PORT = 502  # the server's port in the trace (Wireshark's mbtcp default)
 CLIENT_TCP_PORT = 49152  # the master's, in the trace (a nominal ephemeral port)
@@ -150,12 +155,14 @@ class WireTrace:
 
     def __init__(self, settings: TraceSettings, interface: str, protocol: str,
                  server_side: bool = False,
-                 opener: Callable[[str], BinaryIO] = lambda path: open(path, 'wb')):
+                 opener: Callable[[str], BinaryIO] = lambda path: open(path, 'wb'),
+                 appender: Callable[[str], BinaryIO] = lambda path: open(path, 'ab')):
         self.settings = settings
         self.format = trace_format(settings.path)
         form = PcapngForm if self.format == 'pcapng' else TextForm
         self.form = form(interface, protocol, server_side)
         self._open = opener
+        self._append = appender
         self._file: Optional[BinaryIO] = None
         self._size = 0
         self._started = False  # a file was opened (the one of a run before shifted first)
@@ -186,21 +193,38 @@ class WireTrace:
 
     def _put(self, block: bytes) -> None:
         if self._file is None:
-            if not self._started and os.path.exists(self.settings.path):
-                self._shift()  # the file of a run before: kept as trace.1
-            self._start()
+            self._begin()
         elif self._size + len(block) > self.settings.max_bytes:
             self._rotate()
         self._file.write(block)
         self._size += len(block)
 
+    def _begin(self) -> None:
+        """Open the file at the first record: go on in this process's, else start anew."""
+        path = os.path.abspath(self.settings.path)
+        if not self._started and path in _WRITTEN_IN_THIS_PROCESS and \
+                os.path.exists(path):
+            self._started = True
+            self._file = self._append(self.settings.path)
+            self._size = os.path.getsize(path)
+            self._write_header()
+            return
+        if not self._started and os.path.exists(path):
+            self._shift()  # the file of a run before: kept as trace.1
+        self._start()
+
     def _start(self) -> None:
         """Open the file and write its headers."""
         self._started = True
+        _WRITTEN_IN_THIS_PROCESS.add(os.path.abspath(self.settings.path))
         self._file = self._open(self.settings.path)
+        self._size = 0
+        self._write_header()
+
+    def _write_header(self) -> None:
         header = self.form.header()
         self._file.write(header)
-        self._size = len(header)
+        self._size += len(header)
 
     def _rotate(self) -> None:
         """Close the file, shift the files and start a new one."""

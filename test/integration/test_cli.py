@@ -153,6 +153,21 @@ def test_scan_on_the_fc_protocol_tells_a_drive_that_does_not_tell_its_type():
         '2 device(s) found at addresses 1-3']
 
 
+def test_scan_finds_an_mcd3000_above_the_module_s_switch_range():
+    # The probe names no model: an MCD 3000 behind its Remote Operator may sit at 32-99.
+    server = make_sim_server({40: 'mcd3000'})
+    tcp_port = server.open_tcp(framing='rtu')
+    server.start()
+    try:
+        code, out = run('scan', '--protocol', 'rtu_over_tcp', '--host', '127.0.0.1',
+                        '--tcp-port', tcp_port, '--addresses', '39-41', '--no-search',
+                        '--timeout', 0.5, '--quiet')
+    finally:
+        server.stop()
+    assert (code, out.splitlines()) == (0, ['address 40: mcd mcd3000, state ready',
+                                            '1 device(s) found at addresses 39-41'])
+
+
 def test_scan_on_ap_ascii_asks_only_the_families_that_line_carries():
     server = make_ap_ascii_server({20: 'mcd500', 21: 'mcd3000'})
     server.open_pty()

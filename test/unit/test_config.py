@@ -76,7 +76,7 @@ MODULE_RANGE = ("'starter.address' = 32 is out of range: the MCD Modbus Module D
 @pytest.mark.parametrize('protocol, device, message', [
     ('modbus_rtu', {'address': 32}, MODULE_RANGE),
     ('ap_ascii', {'address': 32}, MODULE_RANGE),
-    ('modbus_rtu', {'model': 'auto', 'address': 32}, MODULE_RANGE),
+    ('modbus_rtu', {'model': 'auto', 'address': 32, 'mcd_interface': 'module'}, MODULE_RANGE),
     ('modbus_rtu', {'model': 'mcd202', 'address': 99, 'mcd_interface': 'module'},
      'set mcd_interface: remote_operator'),
     ('modbus_rtu', {'model': 'mcd3000', 'mcd_interface': 'module', 'address': 32},
@@ -98,6 +98,7 @@ def test_an_mcd_address_beyond_what_sets_it_is_refused(protocol, device, message
     {'address': 31}, {'address': 1},
     {'address': 99, 'mcd_interface': 'remote_operator'},
     {'model': 'mcd3000', 'address': 99},  # the MCD 3000 takes the Remote Operator's range
+    {'model': 'auto', 'address': 40},  # a model not named may be an MCD 3000 (scan's probe)
 ])
 def test_an_mcd_address_within_what_sets_it_is_taken(device):
     built = build(None, {'starter': {**GOOD_DEVICE, **device}})

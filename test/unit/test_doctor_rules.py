@@ -1,9 +1,11 @@
 """The doctor's rules on files alone: a fake sysfs and /dev tree, access, settings, fixes."""
 
+import argparse
 import os
 
 from drive_bridge.sim.adapter import parse_device_line, SerialSetting
 from drive_bridge.tools import doctor_search as search
+from drive_bridge.tools.doctor import listen_seconds
 from drive_bridge.tools.doctor_findings import exit_status, FTDI_UDEV_RULE, ok, problem
 from drive_bridge.tools.doctor_line import echo_finding
 from drive_bridge.tools.doctor_port import access_finding, port_findings, PortAccess
@@ -140,3 +142,10 @@ def test_the_device_line_option():
     assert parse_device_line('19200:N:1') == SerialSetting(19200, 1)
     with pytest.raises(ValueError, match='give BAUD'):
         parse_device_line('9601')
+
+
+@pytest.mark.parametrize('text', ['nan', 'inf', '1e20', '-5', '61', 'soon'])
+def test_the_listening_time_is_checked_in_one_line(text):
+    with pytest.raises(argparse.ArgumentTypeError, match='give the seconds to listen, 0-60'):
+        listen_seconds(text)
+    assert listen_seconds('0') == 0.0 and listen_seconds('2.5') == 2.5

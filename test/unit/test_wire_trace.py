@@ -9,6 +9,7 @@ from drive_bridge.config import build_config
 from drive_bridge.errors import ConfigError
 from drive_bridge.protocol.crc import append_crc
 from drive_bridge.tools import trace_text
+from drive_bridge.transport import wire_trace
 from drive_bridge.transport.wire_trace import (
     comment, rotated_name, trace_format, TraceRecord, TraceSettings, WireTrace)
 import pytest
@@ -90,10 +91,10 @@ def test_a_pcapng_trace_opens_in_tshark_with_modbus_direction_time_and_outcome(t
 
 @needs_tshark
 def test_modbus_tcp_records_carry_the_port_tags_that_tell_query_from_response(tmp_path):
-    path = tmp_path / 'tcp.pcapng'
     adu = bytes.fromhex('000100000006110300010002')
     reply = bytes.fromhex('00010000000711030412345678')
     for server_side in (False, True):
+        path = tmp_path / f'tcp_{server_side}.pcapng'
         trace = WireTrace(TraceSettings(str(path)), '10.0.0.5:502', 'modbus_tcp', server_side)
         trace.write([TraceRecord(server_side, adu, T0_NS, T0_NS, 'ok', 17),
                      TraceRecord(not server_side, reply, T0_NS + 10**6, T0_NS + 10**6, 'ok',
@@ -122,15 +123,31 @@ def test_a_full_file_is_rotated_the_oldest_dropped_and_each_file_stays_within_th
     assert trace.records == 800
 
 
-def test_the_file_of_a_run_before_is_shifted_to_1_not_overwritten(tmp_path):
+def test_the_file_of_a_run_before_is_shifted_to_1_not_overwritten(tmp_path, monkeypatch):
     path = str(tmp_path / 'line.txt')
     for run in range(3):
+        monkeypatch.setattr(wire_trace, '_WRITTEN_IN_THIS_PROCESS', set())  # another process
         trace = WireTrace(TraceSettings(path, files=2), f'run{run}', 'modbus_rtu')
         trace.write(exchange())
         trace.close()
     assert sorted(os.listdir(tmp_path)) == ['line.1.txt', 'line.txt']
     assert 'run1' in open(rotated_name(path, 1)).readline()
     assert 'run2' in open(path).readline()
+
+
+@needs_tshark
+def test_a_trace_opened_again_in_one_process_goes_on_in_its_file(tmp_path):
+    # A command's search opens the port (and its trace) at each setting: one file, whole.
+    path = str(tmp_path / 'scan.pcapng')
+    for index in range(3):
+        trace = WireTrace(TraceSettings(path), f'setting{index}', 'modbus_rtu')
+        trace.write(exchange(index * 10**9))
+        trace.close()
+    assert os.listdir(tmp_path) == ['scan.pcapng']
+    rows = tshark_fields(path, 'frame.time_epoch', 'mbrtu.unit_id')  # a section each
+    assert [row[1] for row in rows] == ['17'] * 6
+    times = [float(row[0]) for row in rows]
+    assert times == sorted(times) and times[4] - times[0] == pytest.approx(2.0)
 
 
 @needs_tshark
@@ -210,3 +227,18 @@ def test_trace_text_refuses_what_is_no_trace_in_one_line(tmp_path):
         list(trace_text.trace_lines(str(tmp_path / 'cut.pcapng')))
     with pytest.raises(ConfigError, match='cannot read'):
         list(trace_text.trace_lines(str(tmp_path / 'none.pcapng')))
+
+
+@pytest.mark.parametrize('end', [b'+infms', b'+nanms', b'+1e99ms'])
+def test_trace_text_refuses_a_frame_of_no_duration_in_one_line(tmp_path, end):
+    path = str(tmp_path / 'line.pcapng')
+    trace = WireTrace(TraceSettings(path), 'ttyUSB0', 'modbus_rtu')
+    trace.write(exchange())
+    trace.close()
+    with open(path, 'rb') as stream:  # the same length, so the blocks stay whole
+        data = stream.read().replace(b'end=+0.01ms', b'end=' + end.ljust(7))
+    with open(path, 'wb') as stream:
+        stream.write(data)
+    with pytest.raises(ConfigError) as error:
+        list(trace_text.trace_lines(path))
+    assert 'lasts' in str(error.value) and '\n' not in str(error.value)
