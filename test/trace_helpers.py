@@ -89,6 +89,9 @@ class RecordingTrace:
     def close(self) -> None:
         pass
 
+    def drain(self) -> bool:
+        return True
+
     def rows(self):
         """Return (direction, hex bytes, outcome, unit) of each record."""
         return [('RX' if r.inbound else 'TX', r.data.hex(), r.outcome, r.unit)

@@ -21,6 +21,7 @@ from drive_bridge.transport.base import (
 from drive_bridge.transport.exchange import ByteLine, LineDiscipline
 from drive_bridge.transport.link import LinkSettings, port_missing, pty_device, URL_PREFIXES
 from drive_bridge.transport.serial_port import PORT_ERRORS, SerialLine
+from drive_bridge.transport.trace_writer import QueuedTrace
 from drive_bridge.transport.wire_trace import TraceSettings, WireTrace
 import serial
 
@@ -102,13 +103,15 @@ class LineTransport(Transport):
             self.discipline.timing = line_timing(self.settings)
 
     def close(self) -> None:
-        """Close the line (idempotent)."""
+        """Close the line (idempotent); what the trace has queued is written first."""
+        if self.discipline.tracer is not None:
+            self.discipline.tracer.trace.drain()
         self.line.close()
 
     def start_trace(self, trace: TraceSettings) -> None:
         """Trace every frame the line discipline sends and reads (see Transport)."""
-        self.discipline.start_trace(WireTrace(trace, trace_interface(self.settings),
-                                              trace_protocol(self.settings)))
+        self.discipline.start_trace(QueuedTrace(WireTrace(
+            trace, trace_interface(self.settings), trace_protocol(self.settings))))
 
     def execute(self, unit: int, request) -> Any:
         """Run one request with device ``unit`` under the line discipline; see Transport."""

@@ -25,6 +25,7 @@ from drive_bridge.protocol.requests import (
 from drive_bridge.transport.base import trace_interface, Transport
 from drive_bridge.transport.link import LinkSettings  # noqa: F401 - re-exported
 from drive_bridge.transport.packet_trace import PacketTracer
+from drive_bridge.transport.trace_writer import QueuedTrace
 from drive_bridge.transport.wire_trace import TraceSettings, WireTrace
 import pymodbus
 from pymodbus.client import ModbusTcpClient
@@ -78,7 +79,9 @@ class ModbusTransport(Transport):
         self._client = client
 
     def close(self) -> None:
-        """Close the port or connection (idempotent)."""
+        """Close the port or connection (idempotent); the trace's queue is written first."""
+        if self._tracer is not None:
+            self._tracer.trace.drain()
         client, self._client = self._client, None
         if client is not None:
             try:
@@ -88,8 +91,8 @@ class ModbusTransport(Transport):
 
     def start_trace(self, trace: TraceSettings) -> None:
         """Trace the ADUs pymodbus sends and receives (:mod:`.packet_trace`)."""
-        self._tracer = PacketTracer(WireTrace(trace, trace_interface(self.settings),
-                                              'modbus_tcp'))
+        self._tracer = PacketTracer(QueuedTrace(WireTrace(
+            trace, trace_interface(self.settings), 'modbus_tcp')))
 
     # -- transactions -------------------------------------------------------------------
     def execute(self, unit: int, transaction) -> Optional[list]:

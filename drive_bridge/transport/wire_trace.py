@@ -151,7 +151,12 @@ class TextForm:
 
 
 class WireTrace:
-    """One line's trace file; see the module docstring. Only the line's thread uses it."""
+    """
+    One line's trace file; see the module docstring. One thread uses it at a time.
+
+    The bus's lines write it from a thread of its own (:mod:`.trace_writer`); closed, it
+    goes on in its file at the next record.
+    """
 
     def __init__(self, settings: TraceSettings, interface: str, protocol: str,
                  server_side: bool = False,
@@ -202,8 +207,7 @@ class WireTrace:
     def _begin(self) -> None:
         """Open the file at the first record: go on in this process's, else start anew."""
         path = os.path.abspath(self.settings.path)
-        if not self._started and path in _WRITTEN_IN_THIS_PROCESS and \
-                os.path.exists(path):
+        if path in _WRITTEN_IN_THIS_PROCESS and os.path.exists(path):
             self._started = True
             self._file = self._append(self.settings.path)
             self._size = os.path.getsize(path)

@@ -1192,7 +1192,8 @@ def test_an_mcd_beyond_the_module_s_switches_needs_the_remote_operator_named(cap
     server.record_frames = True
     server.start()
     try:
-        code, _ = run('status', *bus(server), '--family', 'mcd', '--address', 40)
+        code, _ = run('status', *bus(server), '--family', 'mcd', '--model', 'mcd500',
+                      '--address', 40)
         assert code == 2
         assert 'DIP switches give 1-31 (manual 000 Appendix B' in one_line(capsys)
         assert list(server.stats.frames) == []  # refused before the line was opened
