@@ -5,6 +5,7 @@ import time
 
 from drive_bridge.protocol import fc_telegram as fc
 from drive_bridge.protocol.fc_control import RAMP_STOP_WORD, START_WORD, STW_ON_REFERENCE
+from drive_bridge.sim import cli as sim_cli
 from drive_bridge.sim.faults import FaultPlan, without_late
 from drive_bridge.sim.fc_protocol_server import (
     FC_PROTOCOL_FAULTS, make_fc_protocol_server, mangle_fc_reply)
@@ -330,3 +331,13 @@ def test_wire_pacing_holds_the_reply_to_the_line_time():
         master.close()
         server.stop()
     assert elapsed >= (16 + fc.GAP_CHARACTERS + 16) * 11 / 9600  # 39 ms at 8E1
+
+
+def test_the_console_describes_trips_and_faults_a_drive_on_the_fc_protocol():
+    # It took an FC-protocol drive for a starter ('FcModel' object has no attribute 'state').
+    server = make_fc_protocol_server({1: 'fc51'})
+    assert sim_cli.run_console_command(server, 'status').startswith('1: fc51 output 0.0 %')
+    assert 'local True' in sim_cli.run_console_command(server, 'hand 1 on')
+    assert server.devices[1].model.local_mode
+    assert 'fc51' in sim_cli.run_console_command(server, 'fault 1 bcc')
+    assert 'alarm word 0x00000010' in sim_cli.run_console_command(server, 'trip 1 4')
