@@ -31,7 +31,7 @@ from drive_bridge.config import build_config
 from drive_bridge.sim.devices import make_device, make_sim_server
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 
-COMMS_TIMEOUT_S = 2.5  # written to the FC 51's par. 8-03 by the set-up writes
+COMMS_TIMEOUT_S = 3.7  # written to the FC 51's par. 8-03 by the set-up writes
 SPOILED_803 = 7  # 0.7 s: what the drill leaves in par. 8-03 while the link is down
 DRILLS = ('pty', 'power', 'tcp')
 

@@ -87,7 +87,7 @@ def bus(sim):
     config = build_config(
         {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2, 'devices': ['conv', 'main']},
         {'conv': {'family': 'fc', 'address': 1, 'poll_rate': 20.0, 'speed_reference': 40.0,
-                  'comms_timeout': 4.0, 'comms_timeout_function': 2},
+                  'comms_timeout': 6.7, 'comms_timeout_function': 2},
          'main': {'family': 'mcd', 'address': 20, 'poll_rate': 10.0}})
     master = BusMaster(config.make_transport(), [d.make_spec() for d in config.devices],
                        BusTiming(backoff_max_s=2.0, frame_gap_s=config.timing.frame_gap_s))
@@ -104,7 +104,7 @@ def state(bus):
 
 def test_drive_and_starter_on_one_bus(bus, sim):
     drive = sim.devices[1].model
-    assert wait_until(lambda: drive.parameters[803] == 40 and drive.parameters[804] == 2, 2.0)
+    assert wait_until(lambda: drive.parameters[803] == 67 and drive.parameters[804] == 2, 2.0)
     assert bus.snapshot('conv').model == 'fc51'
     assert list(drive.control_words_received) == []  # nothing written before a command
     assert bus.submit_command('conv', 'start').result(3) == \

@@ -39,7 +39,7 @@ def test_two_vlt_models_on_one_bus(sim):
     config = build_config(
         {'port': sim.pty_path, 'parity': 'N', 'timeout': 1.0, 'devices': ['fan', 'pump']},
         {'fan': {'family': 'vlt', 'model': 'vlt6000', 'address': 1, 'poll_rate': 20.0,
-                 'speed_reference': 40.0, 'comms_timeout': 10.0,
+                 'speed_reference': 40.0, 'comms_timeout': 29.3,
                  'drive_link_timeout': 0.8},
          'pump': {'family': 'vlt', 'model': 'vlt5000', 'address': 2, 'poll_rate': 10.0}})
     bus = BusMaster(config.make_transport(), [d.make_spec() for d in config.devices],
@@ -47,7 +47,7 @@ def test_two_vlt_models_on_one_bus(sim):
     bus.start()
     try:
         assert wait_until(lambda: bus.snapshot('fan').online and bus.snapshot('pump').online)
-        assert wait_until(lambda: sim.devices[1].model.card_timeouts == [1000, 80], 2.0)
+        assert wait_until(lambda: sim.devices[1].model.card_timeouts == [2930, 80], 2.0)
         assert sim.devices[2].model.card_timeouts[0] == 0  # comms_timeout 0: left alone
         assert bus.submit_command('fan', 'start').result(3)
         assert wait_until(lambda: bus.snapshot('fan').reading.state == 'running', 3.0)

@@ -778,7 +778,7 @@ def test_monitor_only_drive_gets_nothing_from_any_input(tmp_path):
     exit.
     """
     rig = make_rig('fc', allow_control=False, speed_reference=0.0, velocity_scale=SCALE,
-                   comms_timeout=3.5, comms_timeout_function=2, reference_timeout=0.5)
+                   comms_timeout=15.5, comms_timeout_function=2, reference_timeout=0.5)
     server, probe = rig.server, rig.probe
     with Session(rig, tmp_path / 'monitor_all.yaml') as session:
         client = session.client

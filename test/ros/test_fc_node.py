@@ -13,7 +13,7 @@ pytestmark = pytest.mark.xdist_group('fc_node')
 
 DEVICES = {
     'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 20.0,
-             'speed_reference': 40.0, 'comms_timeout': 4.0, 'comms_timeout_function': 2},
+             'speed_reference': 40.0, 'comms_timeout': 6.7, 'comms_timeout_function': 2},
     'main': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 5.0},
 }
 
@@ -149,7 +149,7 @@ def test_local_operation_is_refused_with_its_reason(node, drive, sim):
 
 def test_setup_writes_and_diagnostics(node, drive):
     # written once the drive is online (the test may be the module's first on its worker)
-    assert node.spin_until(lambda: drive.parameters[803] == 40 and drive.parameters[804] == 2)
+    assert node.spin_until(lambda: drive.parameters[803] == 67 and drive.parameters[804] == 2)
     assert node.wait_fresh_diagnostics()  # published after the writes: the drive's values now
     status = node.diagnostics('conv')
     assert status.hardware_id == 'fc fc51 address 1'

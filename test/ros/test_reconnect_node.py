@@ -13,10 +13,10 @@ pytestmark = pytest.mark.xdist_group('reconnect_node')
 
 DEVICES = {
     'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 10.0,
-             'comms_timeout': 2.5, 'comms_timeout_function': 2},
+             'comms_timeout': 3.7, 'comms_timeout_function': 2},
     'main': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 5.0},
 }
-CONFIGURED_803 = 25  # 2.5 s in 0.1 s units
+CONFIGURED_803 = 37  # 3.7 s in 0.1 s units
 SPOILED_803 = 7
 
 

@@ -13,14 +13,14 @@ def test_vlt6000_start_speed_trip_reset_coast(tmp_path):
                                                   'timeout': 0.2},
                           {'fan': {'family': 'vlt', 'model': 'vlt6000', 'address': 1,
                                    'poll_rate': 20.0, 'speed_reference': 40.0,
-                                   'comms_timeout': 2.5}})
+                                   'comms_timeout': 5.6}})
     process = start_node(params, namespace='/hvac')
     client = RosClient(['fan'], namespace='/hvac', drives=['fan'])
     drive = server.devices[1].model
     try:
         assert client.wait_state('fan', 'ready', 15.0)
-        # register 2 = 1.0 s in 10 ms units, written by the set-up writes after the first poll
-        assert client.spin_until(lambda: drive.card_timeouts[0] == 250)
+        # register 2 = 5.6 s in 10 ms units, written by the set-up writes after the first poll
+        assert client.spin_until(lambda: drive.card_timeouts[0] == 560)
         assert client.call('fan', 'start').success
         assert client.wait_state('fan', 'running')
         assert drive.reference_word == 0x1999
