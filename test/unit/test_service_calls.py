@@ -21,12 +21,22 @@ class FakeGuard:
 
 
 class FakeNode:
-    """What ServiceCalls needs of the node: one guard condition; its callback is run here."""
+    """What ServiceCalls needs of the node: a guard condition, timers; callbacks run here."""
+
+    def __init__(self):
+        self.timers = []
 
     def create_guard_condition(self, callback, callback_group=None):
         self.on_guard = callback
         self.guard = FakeGuard()
         return self.guard
+
+    def create_timer(self, period_s, callback, callback_group=None, clock=None):
+        self.timers.append((period_s, callback))
+        return self.timers[-1]
+
+    def destroy_timer(self, timer):
+        self.timers.remove(timer)
 
 
 class Call:
@@ -116,6 +126,27 @@ def test_closing_the_bus_refuses_every_waiting_call_and_cancels_what_was_not_sen
     assert waiting.cancelled() and not running.cancelled()
     assert str(first.outcome) == 'start: the bus was closed'
     assert isinstance(second.outcome, CommandRefused)
+
+
+def test_services_that_just_answered_are_destroyed_only_after_the_grace_time():
+    node, calls = bench()
+    destroyed = []
+    calls.destroy_later(lambda: destroyed.append('motor'))
+    calls.destroy_later(lambda: destroyed.append('pump'))
+    assert destroyed == []  # the answers may still be on their way to the clients
+    assert [period_s for period_s, _ in node.timers] == [service_calls.RESPONSE_GRACE_S]
+    node.timers[0][1]()  # the grace time passed
+    assert destroyed == ['motor', 'pump'] and node.timers == []
+    calls.destroy_retired()
+    assert destroyed == ['motor', 'pump']  # once
+
+
+def test_a_new_configuration_destroys_the_retired_services_at_once():
+    node, calls = bench()
+    destroyed = []
+    calls.destroy_later(lambda: destroyed.append('motor'))
+    calls.destroy_retired()
+    assert destroyed == ['motor'] and node.timers == []
 
 
 def test_the_gate_takes_stops_only_while_inactive_and_nothing_once_closed():
