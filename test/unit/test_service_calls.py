@@ -1,6 +1,8 @@
 """The node's command paths without a node: the gate, and service calls awaiting the bus."""
 
 from concurrent.futures import Future
+import threading
+from types import SimpleNamespace
 
 from drive_bridge.errors import CommandRefused, DriveBridgeError
 from drive_bridge.protocol.commands import Command
@@ -10,6 +12,8 @@ import pytest
 service_calls = pytest.importorskip('drive_bridge.ros.service_calls',
                                     reason='ROS 2 (rclpy) from PyPI')
 gate_module = pytest.importorskip('drive_bridge.ros.gate', reason='ROS 2 (rclpy) from PyPI')
+device_interface = pytest.importorskip('drive_bridge.ros.device_interface',
+                                       reason='ROS 2 (rclpy) from PyPI')
 
 
 class FakeGuard:
@@ -147,6 +151,19 @@ def test_a_new_configuration_destroys_the_retired_services_at_once():
     calls.destroy_later(lambda: destroyed.append('motor'))
     calls.destroy_retired()
     assert destroyed == ['motor'] and node.timers == []
+
+
+def test_the_last_answer_of_a_closed_device_retires_its_services_for_the_grace_time():
+    node, calls = bench()
+    destroyed = []
+    interface = SimpleNamespace(  # a DeviceInterface whose bus closed during one call
+        _lock=threading.Lock(), _calls_in_progress=1, _closing=True,
+        _paths=SimpleNamespace(calls=calls), _node=SimpleNamespace(executor=None),
+        _destroy_services=lambda: destroyed.append('motor'))
+    device_interface.DeviceInterface._call_ended(interface)
+    assert destroyed == [] and len(node.timers) == 1  # its answer is still on its way
+    node.timers[0][1]()
+    assert destroyed == ['motor']
 
 
 def test_the_gate_takes_stops_only_while_inactive_and_nothing_once_closed():
