@@ -7,8 +7,9 @@ the bus. The services are coroutines that submit the command and await the bus's
 (:mod:`drive_bridge.ros.service_calls`); ``speed_reference`` only hands the value to the bus.
 Both ask the :class:`~drive_bridge.ros.gate.CommandGate` first, so an inactive node sends
 nothing but stops, and a closed bus nothing at all. A service that is still answering a call
-when the bus closes is destroyed only after that answer went out: rclpy sends the response
-after the coroutine returns, on the executor thread, and a destroyed service cannot send it.
+when the bus closes is destroyed only a grace time after that answer went out
+(:meth:`~drive_bridge.ros.service_calls.ServiceCalls.destroy_later`): a destroyed service
+cannot send it, and its DDS writer deleted right after sending may not have delivered it.
 """
 
 from dataclasses import dataclass
@@ -98,15 +99,12 @@ class DeviceInterface:
             self._node.destroy_service(service)
 
     def _call_ended(self) -> None:
-        """Count a call out; the last one of a closed interface has its services destroyed."""
+        """Count a call out; the last one of a closed interface has its services retired."""
         with self._lock:
             self._calls_in_progress -= 1
             last = self._closing and self._calls_in_progress == 0
-        executor = self._node.executor
-        if last and executor is not None:  # after rclpy sent this call's response
-            executor.create_task(self._destroy_services)
-        elif last:
-            self._destroy_services()
+        if last:  # once its response has had time to reach the client
+            self._paths.calls.destroy_later(self._destroy_services)
 
     async def _on_trigger(self, command: Command, request: Trigger.Request,
                           response: Trigger.Response) -> Trigger.Response:

@@ -72,6 +72,7 @@ class DriveBridgeNode(LifecycleNode):
     def destroy_node(self) -> None:
         """Stop taking the package's log records, then destroy the commands node and this."""
         logs.detach(self._log_handler)
+        self._calls.destroy_retired()
         self._inputs.destroy_node()
         super().destroy_node()
 
@@ -135,6 +136,7 @@ class DriveBridgeNode(LifecycleNode):
                 self.get_logger().error(f'configuration error: {error}')
             return TransitionCallbackReturn.FAILURE
         self.config_error = ''
+        self._calls.destroy_retired()  # the old services first: the new may share their names
         self._session = BusSession(self, self.config)
         self._gate.bus = self._session.bus
         self._session.add_interfaces(self, CommandPaths(

@@ -9,17 +9,29 @@ to the coroutine's rclpy future. A call the bus leaves waiting past its give-up 
 answered there too: a command the bus has not taken yet is cancelled first, so it is never
 sent; one already on its way is answered as "not confirmed". :meth:`ServiceCalls.answer_all`
 refuses every waiting call when the bus is closed, cancelling what was not yet sent.
+
+A service that answered the last call of a closed bus is destroyed a grace time later
+(:meth:`ServiceCalls.destroy_later`): rclpy hands the response to the DDS writer and returns,
+and the writer sends it again until the client acknowledges it. Deleting the writer right
+after lost the answer under load (a start in flight at a lifecycle shutdown: its caller never
+heard back). A new configuration and the node's end destroy such services at once.
 """
 
 from concurrent.futures import Future
 import threading
 import time
-from typing import List
+from typing import Callable, List, Optional
 
 from drive_bridge.errors import CommandRefused, DriveBridgeError
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.task import Future as RosFuture
+from rclpy.timer import Timer
+
+# How long a service outlives its last answer: more than Fast DDS's heartbeat period (3 s),
+# after which a reliable writer sends again what its reader has not acknowledged.
+RESPONSE_GRACE_S = 5.0
 
 
 class PendingCall:
@@ -35,9 +47,13 @@ class PendingCall:
 class ServiceCalls:
     """The calls of one node waiting for its bus, and the guard that hands them the answers."""
 
-    def __init__(self, node: Node):
+    def __init__(self, node: Node, grace_s: float = RESPONSE_GRACE_S):
+        self._node = node
         self._pending: List[PendingCall] = []
         self._lock = threading.Lock()
+        self._grace_s = grace_s
+        self._retired: List[Callable[[], None]] = []
+        self._retire_timer: Optional[Timer] = None
         # Service coroutines stay "executing" while they await the bus: they and the guard
         # that hands them the bus's answers must not share a mutually exclusive group.
         self.callback_group = ReentrantCallbackGroup()
@@ -69,6 +85,27 @@ class ServiceCalls:
             if not call.ros_future.done():
                 call.bus_future.cancel()
                 call.ros_future.set_result(CommandRefused(f'{call.label}: {reason}'))
+
+    def destroy_later(self, destroy: Callable[[], None]) -> None:
+        """Run ``destroy`` (of services that just answered) a grace time from now."""
+        with self._lock:
+            self._retired.append(destroy)
+            if self._retire_timer is not None:
+                return
+            # The steady clock: a node's clock stands still with use_sim_time and no /clock.
+            self._retire_timer = self._node.create_timer(
+                self._grace_s, self.destroy_retired, callback_group=self.callback_group,
+                clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def destroy_retired(self) -> None:
+        """Destroy now what waits for its grace time (a new configuration, the node's end)."""
+        with self._lock:
+            timer, self._retire_timer = self._retire_timer, None
+            retired, self._retired = self._retired, []
+        if timer is not None:
+            self._node.destroy_timer(timer)
+        for destroy in retired:
+            destroy()
 
     def _deliver(self) -> None:
         """Hand the bus's answers to the waiting services (executor thread)."""

@@ -1,6 +1,8 @@
 """The node's command paths without a node: the gate, and service calls awaiting the bus."""
 
 from concurrent.futures import Future
+import threading
+from types import SimpleNamespace
 
 from drive_bridge.errors import CommandRefused, DriveBridgeError
 from drive_bridge.protocol.commands import Command
@@ -10,6 +12,8 @@ import pytest
 service_calls = pytest.importorskip('drive_bridge.ros.service_calls',
                                     reason='ROS 2 (rclpy) from PyPI')
 gate_module = pytest.importorskip('drive_bridge.ros.gate', reason='ROS 2 (rclpy) from PyPI')
+device_interface = pytest.importorskip('drive_bridge.ros.device_interface',
+                                       reason='ROS 2 (rclpy) from PyPI')
 
 
 class FakeGuard:
@@ -21,12 +25,22 @@ class FakeGuard:
 
 
 class FakeNode:
-    """What ServiceCalls needs of the node: one guard condition; its callback is run here."""
+    """What ServiceCalls needs of the node: a guard condition, timers; callbacks run here."""
+
+    def __init__(self):
+        self.timers = []
 
     def create_guard_condition(self, callback, callback_group=None):
         self.on_guard = callback
         self.guard = FakeGuard()
         return self.guard
+
+    def create_timer(self, period_s, callback, callback_group=None, clock=None):
+        self.timers.append((period_s, callback))
+        return self.timers[-1]
+
+    def destroy_timer(self, timer):
+        self.timers.remove(timer)
 
 
 class Call:
@@ -116,6 +130,40 @@ def test_closing_the_bus_refuses_every_waiting_call_and_cancels_what_was_not_sen
     assert waiting.cancelled() and not running.cancelled()
     assert str(first.outcome) == 'start: the bus was closed'
     assert isinstance(second.outcome, CommandRefused)
+
+
+def test_services_that_just_answered_are_destroyed_only_after_the_grace_time():
+    node, calls = bench()
+    destroyed = []
+    calls.destroy_later(lambda: destroyed.append('motor'))
+    calls.destroy_later(lambda: destroyed.append('pump'))
+    assert destroyed == []  # the answers may still be on their way to the clients
+    assert [period_s for period_s, _ in node.timers] == [service_calls.RESPONSE_GRACE_S]
+    node.timers[0][1]()  # the grace time passed
+    assert destroyed == ['motor', 'pump'] and node.timers == []
+    calls.destroy_retired()
+    assert destroyed == ['motor', 'pump']  # once
+
+
+def test_a_new_configuration_destroys_the_retired_services_at_once():
+    node, calls = bench()
+    destroyed = []
+    calls.destroy_later(lambda: destroyed.append('motor'))
+    calls.destroy_retired()
+    assert destroyed == ['motor'] and node.timers == []
+
+
+def test_the_last_answer_of_a_closed_device_retires_its_services_for_the_grace_time():
+    node, calls = bench()
+    destroyed = []
+    interface = SimpleNamespace(  # a DeviceInterface whose bus closed during one call
+        _lock=threading.Lock(), _calls_in_progress=1, _closing=True,
+        _paths=SimpleNamespace(calls=calls), _node=SimpleNamespace(executor=None),
+        _destroy_services=lambda: destroyed.append('motor'))
+    device_interface.DeviceInterface._call_ended(interface)
+    assert destroyed == [] and len(node.timers) == 1  # its answer is still on its way
+    node.timers[0][1]()
+    assert destroyed == ['motor']
 
 
 def test_the_gate_takes_stops_only_while_inactive_and_nothing_once_closed():
