@@ -69,9 +69,9 @@ def hint_nothing_found(args, bus: Dict[str, Any], first: int, last: int, out) ->
         configured = doctor_search.configured_setting(dict(bus, port=port))
         settings = doctor_search.settings_to_try(configured, port=port)[1:]
         addresses = list(range(first, high + 1))
-        worst_s = sum(doctor_search.attempt_s(s, SHORT_SEARCH_TIMEOUT_S) for s in settings)
+        worst_s = doctor_search.search_worst_s(addresses, settings, SHORT_SEARCH_TIMEOUT_S)
         print(f'searching {len(settings)} other protocols, baud rates and parities at '
-              f'addresses {first}-{high} (at most {worst_s * len(addresses):.0f} s, '
+              f'addresses {first}-{high} (at most {worst_s:.0f} s, '
               'until something answers; --no-search skips this)', file=out, flush=True)
         hits = doctor_search.search(dict(bus, port=port), addresses, settings,
                                     SHORT_SEARCH_TIMEOUT_S,

@@ -187,10 +187,16 @@ def fix(found: Setting, configured: Setting, family: Optional[str]) -> str:
     return f'set {" and ".join(device)}, or set {", ".join(bridge)}'
 
 
+def search_worst_s(addresses: Sequence[int], settings: Sequence[Setting],
+                   timeout_s: float) -> float:
+    """Return how long a search of ``addresses`` at ``settings`` takes at the most."""
+    return sum(attempt_s(setting, timeout_s) for setting in settings) * len(addresses)
+
+
 def plan_finding(addresses: Sequence[int], settings: Sequence[Setting], timeout_s: float,
                  pty: bool) -> Finding:
     """Return what the search will try and how long it takes at the most."""
-    worst_s = sum(attempt_s(setting, timeout_s) for setting in settings) * len(addresses)
+    worst_s = search_worst_s(addresses, settings, timeout_s)
     protocols = sorted({setting.protocol for setting in settings}, key=SEARCH_PROTOCOLS.index)
     bauds = ', '.join(str(b) for b in dict.fromkeys(setting.baudrate for setting in settings))
     parities = 'no parity (a pty carries none: stop bits only)' if pty else 'parities ' + \
