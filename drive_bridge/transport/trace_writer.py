@@ -16,7 +16,7 @@ import logging
 import os
 import queue
 import threading
-from typing import Dict, Iterable, List, Optional
+from typing import Dict, Iterable, List
 
 from drive_bridge.transport.wire_trace import TraceRecord, WireTrace
 
@@ -36,7 +36,7 @@ class QueuedTrace:
         self.dropped = 0  # batches dropped because the writer fell behind
         self._stopped = False
         self._queue: 'queue.Queue' = queue.Queue(queued_batches)
-        path = os.path.abspath(trace.settings.path)
+        path = self._path = os.path.abspath(trace.settings.path)
         with _LIVE_LOCK:
             before, _LIVE[path] = _LIVE.get(path), self
         if before is not None:
@@ -91,9 +91,8 @@ class QueuedTrace:
             LOG.error('wire trace %s: the writer is still busy after %g s (a hung disk?); '
                       'left behind', self.trace.settings.path, wait_s)
         with _LIVE_LOCK:
-            path = os.path.abspath(self.trace.settings.path)
-            if _LIVE.get(path) is self:
-                del _LIVE[path]
+            if _LIVE.get(self._path) is self:
+                del _LIVE[self._path]
 
     def _run(self) -> None:
         while True:
@@ -112,7 +111,7 @@ class QueuedTrace:
 def _close_all() -> None:
     """At exit: let each trace write what is queued (bounded)."""
     with _LIVE_LOCK:
-        live: List[Optional[QueuedTrace]] = list(_LIVE.values())
+        live: List[QueuedTrace] = list(_LIVE.values())
     for trace in live:
         trace.close()
 
