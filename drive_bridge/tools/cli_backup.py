@@ -10,10 +10,11 @@ The file itself (its format and checks) is :mod:`drive_bridge.tools.backup_file`
 import os
 from typing import Any, Dict, List, Optional, Tuple
 
+from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import DeviceProfile, ParameterOptions
 from drive_bridge.devices.parameters import ParameterSpec
 from drive_bridge.errors import CommandRefused, DriveBridgeError
-from drive_bridge.tools import backup_file, parameter_info as info
+from drive_bridge.tools import backup_file
 from drive_bridge.tools.cli_session import (
     allow_writes, Interrupted, Progress, run_session, Session, warn, with_session)
 from drive_bridge.tools.cli_target import (

@@ -7,8 +7,9 @@
 from dataclasses import replace
 from typing import Any, Optional
 
+from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.parameters import ParameterSpec
-from drive_bridge.tools import backup_file, parameter_info as info
+from drive_bridge.tools import backup_file
 from drive_bridge.tools.cli_session import parameter_options, Session, with_session
 from drive_bridge.tools.cli_target import CliError, EXIT_OK, EXIT_USAGE
 

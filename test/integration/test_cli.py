@@ -377,7 +377,7 @@ def test_a_value_the_profile_would_refuse_at_its_write_is_found_before_anything_
         line, tmp_path, capsys, monkeypatch):
     # Without the integer of 355.0 (as before), the table's check lets it through and the
     # MCD profile refuses its write: the whole file is refused first, nothing written.
-    monkeypatch.setattr('drive_bridge.tools.parameter_info.whole_number', lambda value: value)
+    monkeypatch.setattr('drive_bridge.devices.parameter_info.whole_number', lambda value: value)
     path = edited(backup(line, tmp_path, MCD500), lambda content: content['parameters'][3]
                   .update(value=float(content['parameters'][3]['value'] + 5)))
     before = dict(model(line, 20).parameters)

@@ -1,10 +1,11 @@
 """The backup file of drive-bridge: written, read back, and checked against a model's table."""
 
 from drive_bridge.devices import fc, mcd, vlt
+from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import ParameterOptions
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.parameters import FC_CONVERSION_FACTORS
-from drive_bridge.tools import backup_file, parameter_info as info
+from drive_bridge.tools import backup_file
 import pytest
 
 FC51 = fc.DATA.table('fc51')

@@ -1,5 +1,5 @@
 """
-What the CLI knows of a device's parameters: table, labels, value parsing and display. No I/O.
+What the bridge knows of a device's parameters: table, labels, value parsing and display. No I/O.
 
 Drives (FC 51, VLT) have per-model tables in their profile (``parameter_table()``); MCD
 starters' registers are raw 16-bit values, numbered 1 to the model's last, with the
