@@ -23,6 +23,7 @@ from drive_bridge import config as cfg
 from drive_bridge.bus.events import BusEvent
 from drive_bridge.bus.master import BusMaster
 from drive_bridge.ros.device_interface import CommandPaths, DeviceInterface
+from drive_bridge.ros.device_parameters.nodes import DeviceParameterNodes
 from rclpy.lifecycle import LifecycleNode
 
 if TYPE_CHECKING:
@@ -46,6 +47,7 @@ class BusSession:
         self._lock = threading.Lock()
         self._devices: Dict[str, DeviceInterface] = {}
         self.joints: Optional['joints.JointInterface'] = None
+        self.parameters: Optional[DeviceParameterNodes] = None  # each device's parameter node
         self.bus = BusMaster(config.make_transport(),
                              [device.make_spec() for device in config.devices],
                              config.timing, listener=self._on_bus_event)
@@ -57,6 +59,8 @@ class BusSession:
             interface = DeviceInterface(node, self.bus.snapshot(device.name), paths)
             with self._lock:
                 self._devices[device.name] = interface
+        self.parameters = DeviceParameterNodes(node, self.config, self.bus, paths.gate,
+                                               paths.give_up_s)
         if not any(device.is_joint for device in self.config.devices):
             return
         # Imported by nodes with joints only: sensor_msgs brings numpy, 0.1 s of CPU a start.
@@ -74,6 +78,8 @@ class BusSession:
     def start(self) -> None:
         """Start the bus thread: reading begins."""
         self.bus.start()
+        if self.parameters is not None:
+            self.parameters.start()
         self._logger.info(
             f'bus {self.config.link.describe()}: '
             + ', '.join(f'{d.name} ({d.family} {d.model} @ {d.address}'
@@ -125,6 +131,9 @@ class BusSession:
                 self.joints = None
         for device in devices:
             device.destroy_endpoints()
+        if self.parameters is not None:
+            self.parameters.destroy()
+            self.parameters = None
 
     def _report_stops(self, outcomes: List[str], when: str) -> None:
         for outcome in outcomes:
