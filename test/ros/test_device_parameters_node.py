@@ -26,7 +26,8 @@ from ros_helpers import running_node, serving
 pytestmark = pytest.mark.xdist_group('device_parameters_node')
 
 DEVICES = {
-    'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 10.0},
+    'conv': {'family': 'fc', 'model': 'fc51', 'address': 1, 'poll_rate': 10.0,
+             'speed_reference': 20.0},
     'fan': {'family': 'vlt', 'model': 'vlt6000', 'address': 2, 'poll_rate': 10.0},
     'main': {'family': 'mcd', 'model': 'mcd500', 'address': 20, 'poll_rate': 10.0},
     'spare': {'family': 'fc', 'model': 'fc51', 'address': 3, 'poll_rate': 10.0,
@@ -119,10 +120,14 @@ class ParameterClient:
         names = self.names(device)
         values = []
 
-        def complete():
+        def complete():  # a value the device refuses to read stays not set
             values[:] = self.get(device, names)
-            return all(value.type != ParameterType.PARAMETER_NOT_SET for value in values)
-        assert self.client.spin_until(complete, 30.0), 'values still not read'
+            return all(value.type != ParameterType.PARAMETER_NOT_SET or
+                       'not readable' in descriptor.additional_constraints
+                       for value, descriptor in zip(values, self.describe(device, names)))
+        assert self.client.spin_until(complete, 30.0), 'not read: ' + ', '.join(
+            name for name, value in zip(names, values)
+            if value.type == ParameterType.PARAMETER_NOT_SET)
         return dict(zip(names, values))
 
 
@@ -269,7 +274,7 @@ def test_device_refusal_in_its_own_words(node, params, sim):
     drive = sim.devices[1].model
     assert node.call('conv', 'start').success
     try:
-        assert node.spin_until(lambda: drive.output_pct != 0.0)
+        assert node.wait_state('conv', 'running')
         before = drive.parameters[124]
         since = len(params.events)
         result = params.set('conv', 'p1_24_motor_current', 3.5)
@@ -362,16 +367,21 @@ def test_sets_while_the_line_is_polled_keep_the_others_poll_rate(params, sim):
             frames = sim.stats.frames[since:]
         return sum(1 for frame in frames if frame[0] == unit) / (time.monotonic() - start)
 
+    def set_and_pause():  # a person at rqt: a few sets a second (a script in a loop is not)
+        assert params.set('conv', 'p3_42_ramp_1_ramp_down_time', next(values)).successful
+        params.client.spin_until(lambda: False, 0.3)
+
     quiet = polls_of(20, 3.0)
     values = iter([2.0, 3.0] * 100)
-    busy = polls_of(20, 3.0, lambda: params.set('conv', 'p3_42_ramp_1_ramp_down_time',
-                                                next(values)))
-    assert busy >= 0.7 * quiet, (quiet, busy)
+    busy = polls_of(20, 3.0, set_and_pause)
+    assert busy >= 0.8 * quiet, (quiet, busy)
 
 
 # -- the real ros2 CLI --------------------------------------------------------------------
-def ros2(*args: str) -> subprocess.CompletedProcess:
-    command = f'. {ROS2_ENV} && ros2 ' + ' '.join(args)
+def ros2(verb: str, *args: str) -> subprocess.CompletedProcess:
+    """Run ``ros2 param VERB`` without the daemon, given time to discover on a busy machine."""
+    waits = ['--spin-time', '5'] if verb == 'list' else ['--spin-time', '5', '--timeout', '10']
+    command = f'. {ROS2_ENV} && ros2 param {verb} --no-daemon ' + ' '.join(waits + list(args))
     return subprocess.run(['bash', '-c', command], capture_output=True, text=True, timeout=60,
                           env=dict(os.environ))
 
@@ -381,24 +391,24 @@ def ros2(*args: str) -> subprocess.CompletedProcess:
                     'DRIVE_BRIDGE_ROS2_ENV names its env.sh)')
 def test_ros2_param_cli(params, sim, tmp_path):
     node = '/line/conv_parameters'
-    listed = ros2('param', 'list', '--no-daemon', node)
+    listed = ros2('list', node)
     assert 'p3_41_ramp_1_ramp_up_time' in listed.stdout, listed.stderr
-    got = ros2('param', 'get', '--no-daemon', node, 'p1_23_motor_frequency')
+    got = ros2('get', node, 'p1_23_motor_frequency')
     assert 'Integer value is:' in got.stdout, got.stderr
-    described = ros2('param', 'describe', '--no-daemon', node, 'p3_41_ramp_1_ramp_up_time')
+    described = ros2('describe', node, 'p3_41_ramp_1_ramp_up_time')
     assert 'Min value: 0.05' in described.stdout and 'Max value: 3600.0' in described.stdout
-    done = ros2('param', 'set', '--no-daemon', node, 'p3_41_ramp_1_ramp_up_time', '5')
+    done = ros2('set', node, 'p3_41_ramp_1_ramp_up_time', '5')
     assert 'Set parameter successful' in done.stdout, done.stdout + done.stderr
     assert sim.devices[1].model.parameters[341] == 500
-    refused = ros2('param', 'set', '--no-daemon', node, 'p3_41_ramp_1_ramp_up_time', '9999')
+    refused = ros2('set', node, 'p3_41_ramp_1_ramp_up_time', '9999')
     assert 'above the maximum' in refused.stdout + refused.stderr
     params.dump('conv')  # every value read once, so that the dump has them all
-    dumped = ros2('param', 'dump', '--no-daemon', node)
+    dumped = ros2('dump', node)
     assert 'p3_41_ramp_1_ramp_up_time: 5.0' in dumped.stdout, dumped.stderr
     dump_file = tmp_path / 'conv.yaml'
     dump_file.write_text(dumped.stdout)
     assert params.set('conv', 'p3_41_ramp_1_ramp_up_time', 3.0).successful
-    loaded = ros2('param', 'load', '--no-daemon', node, str(dump_file))
+    loaded = ros2('load', node, str(dump_file))
     assert sim.devices[1].model.parameters[341] == 500, loaded.stdout + loaded.stderr
     assert 'Set parameter p3_41_ramp_1_ramp_up_time successful' in loaded.stdout
     assert params.set('conv', 'p3_41_ramp_1_ramp_up_time', 3.0).successful

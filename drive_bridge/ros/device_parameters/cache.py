@@ -20,13 +20,26 @@ class ValueCache:
         self._clock = clock
         self._lock = threading.Lock()
         self._values: Dict[int, Tuple[Any, float]] = {}
+        self._errors: Dict[int, str] = {}  # why the device refused the last read
 
     def store(self, number: int, value: Any) -> Optional[Any]:
         """Keep ``value`` as read now; return the value it replaces (None: none)."""
         with self._lock:
             before = self._values.get(number)
             self._values[number] = (value, self._clock())
+            self._errors.pop(number, None)
         return None if before is None else before[0]
+
+    def refused(self, number: int, reason: str) -> None:
+        """Keep why the device refused to read ``number`` (its value is no longer held)."""
+        with self._lock:
+            self._values.pop(number, None)
+            self._errors[number] = reason
+
+    def error(self, number: int) -> str:
+        """Return why the device refused the last read of ``number`` ('' if it did not)."""
+        with self._lock:
+            return self._errors.get(number, '')
 
     def value(self, number: int) -> Optional[Any]:
         """Return the value last read (None: never read, or forgotten)."""
@@ -44,6 +57,7 @@ class ValueCache:
         """Forget every value (the device went offline)."""
         with self._lock:
             self._values.clear()
+            self._errors.clear()
 
     def __len__(self) -> int:
         with self._lock:

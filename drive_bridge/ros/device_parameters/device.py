@@ -106,7 +106,12 @@ class DeviceParameters:
 
     def _store(self, parameter: RemoteParameter, done: Future) -> None:
         """Keep a value read (bus thread); announce it if it changed."""
-        if done.cancelled() or done.exception() is not None:
+        if done.cancelled():
+            return
+        error = done.exception()
+        if error is not None:
+            if str(error).startswith('rejected by'):  # the device's own refusal
+                self.cache.refused(parameter.number, str(error))
             return
         value = info.display_value(parameter.spec, done.result(), self.factors)
         if isinstance(value, str):

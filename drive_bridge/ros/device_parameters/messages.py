@@ -51,19 +51,22 @@ def python_value(message: ParameterValue) -> Any:
     return list(value) if message.type >= ParameterType.PARAMETER_BYTE_ARRAY else value
 
 
-def age_text(age_s: Optional[float]) -> str:
-    """Return the value's age in words."""
+def age_text(age_s: Optional[float], error: str = '') -> str:
+    """Return the value's age in words (or why the device refuses to read it)."""
+    if error:
+        return f'not readable: {error}'
     if age_s is None:
         return 'value not read yet (or the device is offline)'
     return f'value read {age_s:.1f} s ago'
 
 
-def descriptor(parameter: RemoteParameter, age_s: Optional[float]) -> ParameterDescriptor:
+def descriptor(parameter: RemoteParameter, age_s: Optional[float],
+               error: str = '') -> ParameterDescriptor:
     """Return the descriptor of ``parameter``; its constraints end with the value's age."""
     constraints = parameter.constraints()
     message = ParameterDescriptor(
         name=parameter.name, type=TYPES[parameter.kind], description=parameter.description(),
-        additional_constraints=(constraints + '; ' if constraints else '') + age_text(age_s),
+        additional_constraints=(constraints + '; ' if constraints else '') + age_text(age_s, error),
         read_only=bool(parameter.read_only), dynamic_typing=False)
     if parameter.kind == INTEGER_KIND:
         message.integer_range = [IntegerRange(from_value=int(parameter.minimum),

@@ -82,8 +82,9 @@ class ParameterServices:
                 response.descriptors.append(self._node.describe_parameter(name))
             else:
                 parameter = self._device.find(name)
+                cache = self._device.cache
                 response.descriptors.append(messages.descriptor(
-                    parameter, self._device.cache.age_s(parameter.number)))
+                    parameter, cache.age_s(parameter.number), cache.error(parameter.number)))
         return response
 
     async def _get_types(self, request, response):

@@ -28,6 +28,7 @@ from drive_bridge.ros.service_calls import ServiceCalls
 from rcl_interfaces.msg import SetParametersResult
 
 NOTHING = 'nothing written'
+HELD_WAIT_S = 0.5  # after a refusal, the value held is read for this long at most
 
 
 class DeviceWriter:
@@ -59,13 +60,15 @@ class DeviceWriter:
 
     async def set(self, parameter: RemoteParameter, given: Any) -> SetParametersResult:
         """Set ``parameter`` to ``given`` (a Python value); return the result in words."""
+        if given is None:  # PARAMETER_NOT_SET: what a dump holds for a value not readable
+            return SetParametersResult(successful=True, reason=f'no value given: {NOTHING}')
         reason = await self.refusal(parameter, given)
         if reason is None:  # a read-only parameter given the value it holds
             return SetParametersResult(successful=True, reason='unchanged (read-only)')
         if not reason:
             reason = await self._write(parameter, typed_value(parameter, given)[0])
         if reason:
-            self._announce_held(parameter)
+            await self._announce_held(parameter)
         return SetParametersResult(successful=not reason, reason=reason)
 
     async def refusal(self, parameter: RemoteParameter, given: Any) -> Optional[str]:
@@ -109,8 +112,8 @@ class DeviceWriter:
         self._announce(parameter, read)
         return ''
 
-    def _announce_held(self, parameter: RemoteParameter) -> None:
+    async def _announce_held(self, parameter: RemoteParameter) -> None:
         """Announce the value the device holds (an editor's widget snaps back to it)."""
-        held = self._device.value(parameter)
+        held = await self.current(parameter, HELD_WAIT_S)
         if held is not None:
             self._announce(parameter, held)
