@@ -13,8 +13,8 @@ is left out unless it is the whole name.
 """
 
 import re
-import unicodedata
 from typing import Dict, Iterable, Mapping, Optional
+import unicodedata
 
 from drive_bridge.devices.parameters import ParameterSpec
 

@@ -50,7 +50,7 @@ class RemoteParameter:
 
     @property
     def number(self) -> int:
-        """Return the parameter number (PNU; MCD: the module's Parameter N)."""
+        """Return the PNU (MCD: the module's Parameter N)."""
         return self.spec.number
 
     def description(self) -> str:
@@ -68,8 +68,8 @@ class RemoteParameter:
         if spec.options:
             options = ', '.join(f'{value} = {text}' for value, text in
                                 sorted(spec.options.items()))
-            parts.append(f'options: {options}' + (' (others may be valid)'
-                                                   if spec.options_partial else ''))
+            partial = ' (others may be valid)' if spec.options_partial else ''
+            parts.append(f'options: {options}{partial}')
         if spec.data_type == TEXT:
             parts.append(f'at most {spec.characters} characters')
         if self.read_only:

@@ -21,7 +21,7 @@ from drive_bridge.bus.master import BusMaster
 from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import ParameterAccess, ParameterOptions
 from drive_bridge.devices.drive import FcProfileDrive
-from drive_bridge.devices.remote_parameters import RemoteParameter, remote_parameters
+from drive_bridge.devices.remote_parameters import remote_parameters, RemoteParameter
 from drive_bridge.ros.device_parameters.cache import ValueCache
 
 

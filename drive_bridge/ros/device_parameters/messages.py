@@ -66,7 +66,8 @@ def descriptor(parameter: RemoteParameter, age_s: Optional[float],
     constraints = parameter.constraints()
     message = ParameterDescriptor(
         name=parameter.name, type=TYPES[parameter.kind], description=parameter.description(),
-        additional_constraints=(constraints + '; ' if constraints else '') + age_text(age_s, error),
+        additional_constraints=(constraints + '; ' if constraints else '')
+        + age_text(age_s, error),
         read_only=bool(parameter.read_only), dynamic_typing=False)
     if parameter.kind == INTEGER_KIND:
         message.integer_range = [IntegerRange(from_value=int(parameter.minimum),

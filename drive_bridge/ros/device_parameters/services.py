@@ -135,7 +135,7 @@ class ParameterServices:
         if parameter is None:
             return SetParametersResult(successful=False, reason=self._unknown(name))
         value = messages.python_value(value_message)
-        return await self._writer.set(parameter, value)
+        return await self._writer.set_value(parameter, value)
 
     def _set_local(self, name: str, value_message) -> SetParametersResult:
         """Set one of the node's own parameters, as rclpy does; read-only and unchanged: ok."""
@@ -175,4 +175,3 @@ class ParameterServices:
     def _unknown(self, name: str) -> str:
         return f'{name} is not a parameter of {self._device.name} (ros2 param list shows ' \
             'them): nothing written'
-

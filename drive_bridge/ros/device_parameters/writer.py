@@ -58,7 +58,7 @@ class DeviceWriter:
             return None
         return self._device.value(parameter)
 
-    async def set(self, parameter: RemoteParameter, given: Any) -> SetParametersResult:
+    async def set_value(self, parameter: RemoteParameter, given: Any) -> SetParametersResult:
         """Set ``parameter`` to ``given`` (a Python value); return the result in words."""
         if given is None:  # PARAMETER_NOT_SET: what a dump holds for a value not readable
             return SetParametersResult(successful=True, reason=f'no value given: {NOTHING}')
