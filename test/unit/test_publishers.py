@@ -4,7 +4,8 @@ from drive_bridge.devices.contracts import DeviceReading
 import pytest
 
 # rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-publishers = pytest.importorskip('drive_bridge.ros.node.publishers', reason='ROS 2 (rclpy) from PyPI')
+publishers = pytest.importorskip('drive_bridge.ros.node.publishers',
+                                 reason='ROS 2 (rclpy) from PyPI')
 
 
 class FakePublisher:

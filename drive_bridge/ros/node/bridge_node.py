@@ -15,13 +15,15 @@ executor: the bus thread publishes each reading (while its next request is on th
 bus's answer (the executor serves topics and timers meanwhile).
 
 The node is a shell over its parts, each in a module of its own: the parameters
-(:mod:`~drive_bridge.ros.node.parameters`), the command gate (:mod:`~drive_bridge.ros.node.gate`), the
-service calls awaiting the bus (:mod:`~drive_bridge.ros.node.service_calls`), the high-rate
-command subscriptions (:mod:`~drive_bridge.ros.node.command_inputs`), ``/diagnostics``
-(:mod:`~drive_bridge.ros.node.diagnostics_publisher`) and, from configure until the bus is closed, the
-bus session (:mod:`~drive_bridge.ros.node.session`) with one interface per device
-(:mod:`~drive_bridge.ros.node.device_interface`) and the joints (:mod:`~drive_bridge.ros.node.joints`).
-The process around it (``main``, the exit signals) is :mod:`drive_bridge.ros.node.process`.
+(:mod:`~drive_bridge.ros.node.parameters`), the command gate
+(:mod:`~drive_bridge.ros.node.gate`), the service calls awaiting the bus
+(:mod:`~drive_bridge.ros.node.service_calls`), the high-rate command subscriptions
+(:mod:`~drive_bridge.ros.node.command_inputs`), ``/diagnostics``
+(:mod:`~drive_bridge.ros.node.diagnostics_publisher`) and, from configure until the bus is
+closed, the bus session (:mod:`~drive_bridge.ros.node.session`) with one interface per device
+(:mod:`~drive_bridge.ros.node.device_interface`) and the joints
+(:mod:`~drive_bridge.ros.node.joints`). The process around it (``main``, the exit signals) is
+:mod:`drive_bridge.ros.node.process`.
 """
 
 from typing import Any, Optional

@@ -30,8 +30,8 @@ class ExitSignals:
     The exit signals of the process, taken by the main thread.
 
     A thread started before the mask was set (when the node runs as ``python -m
-    drive_bridge.ros.node.process`` rather than through :mod:`drive_bridge.ros.node.entry`) may still
-    take one: Python then runs :meth:`_take_stray` in the main thread, which records it.
+    drive_bridge.ros.node.process`` rather than through :mod:`drive_bridge.ros.node.entry`) may
+    still take one: Python then runs :meth:`_take_stray` in the main thread, which records it.
     """
 
     def __init__(self):

@@ -106,7 +106,11 @@ class ParameterDeclarations:
 
 
 class TakesJointSettings(Protocol):
-    """What runtime changes ask of the joints (:class:`drive_bridge.ros.node.joints.JointBridge`)."""
+    """
+    What runtime changes ask of the joints.
+
+    The joints' side is :class:`drive_bridge.ros.node.joints.JointBridge`.
+    """
 
     def check_settings(self, changes: SettingChanges) -> None:
         """Raise ConfigError for a change the joints cannot take."""

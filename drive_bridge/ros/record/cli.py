@@ -103,7 +103,8 @@ def bridge_topics(node: Node, namespace: str) -> Dict[str, str]:
     Return topic -> type of the drive_bridge node in ``namespace`` ({} if not found).
 
     Its command subscriptions (``speed_reference``, ``~/joint_commands``) are those of its
-    commands node, ``drive_bridge_commands`` beside it (:mod:`drive_bridge.ros.node.command_inputs`).
+    commands node, ``drive_bridge_commands`` beside it
+    (:mod:`drive_bridge.ros.node.command_inputs`).
     """
     topics: Dict[str, str] = {}
     commands_node = BRIDGE_NODE + COMMANDS_NODE_SUFFIX
