@@ -4,9 +4,9 @@ Architecture: the import contracts of ``.importlinter`` hold, and they catch a v
 ``lint-imports`` checks the package's layers, that the ROS products (the node,
 ``drive_bridge_ctl``, the recorder) never import each other, that only ``ros`` imports rclpy
 and only ``transport`` pymodbus and pyserial, that nothing imports test code, and that no
-package has an import cycle among its modules. The second test breaks a copy of the package on purpose
-and asserts that each contract so broken is reported: a checker that cannot fail proves
-nothing.
+package has an import cycle among its modules. The second test breaks a copy of the package
+on purpose and asserts that each contract so broken is reported: a checker that cannot fail
+proves nothing.
 """
 
 import os
