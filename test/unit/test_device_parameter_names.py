@@ -7,7 +7,7 @@ from drive_bridge.devices.parameters import (
     FC_CONVERSION_FACTORS, ParameterSpec, VLT_CONVERSION_FACTORS)
 from drive_bridge.devices.remote_parameters import (
     DOUBLE_KIND, INTEGER_KIND, remote_parameters, TEXT_KIND, typed_value, write_refusal)
-from drive_bridge.ros.device_parameters.cache import ValueCache
+from drive_bridge.ros.node.device_parameters.cache import ValueCache
 import pytest
 
 
