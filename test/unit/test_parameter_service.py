@@ -5,7 +5,7 @@ from drive_bridge.devices.contracts import ParameterOptions
 from drive_bridge.devices.drive import DriveProfile
 from drive_bridge.devices.lvsg import LvsgProfile
 from drive_bridge.devices.mcd import McdProfile
-from drive_bridge.devices.parameter_service import parse_parameter_number, ParameterService
+from drive_bridge.devices.parameter_service import ParameterService, parse_parameter_number
 from drive_bridge.errors import CommandRefused, MonitorOnly, ProtocolError, ReadBackMismatch
 from drive_bridge.protocol.requests import WriteCoil
 import pytest
@@ -57,8 +57,8 @@ def test_an_mcd_parameter_is_found_by_its_designation_or_its_modbus_number():
     parameters, line, _ = service('mcd500', McdProfile('mcd500'), name='crusher')
     assert parameters.number('1-4') == 4 and parameters.number('4') == 4
     assert parameters.manual_number(4) == '1-4' and parameters.label(4) == '4'
-    with pytest.raises(CommandRefused, match="parameter 99-1: not in the table of the mcd500; "
-                       "give the Modbus Module's parameter number"):
+    with pytest.raises(CommandRefused, match='parameter 99-1: not in the table of the mcd500; '
+                       'give the Modbus Module.s parameter number'):
         parameters.number('99-1')
     assert line.sent == []
 
@@ -134,7 +134,8 @@ def test_a_monitor_only_device_gets_no_write_and_nothing_of_its_plan():
 def test_a_vlt_text_read_writes_its_index_so_a_monitor_only_vlt_refuses_it():
     profile = DriveProfile(vlt.DATA, 'vlt6000')
     parameters, line, _ = service('vlt6000', profile, writes_allowed=False, name='fan')
-    with pytest.raises(MonitorOnly, match=r'^fan is monitor only .*: read Display Text 1 \(par. 533\) not sent$'):
+    with pytest.raises(MonitorOnly, match=r'^fan is monitor only .*: read Display Text 1 '
+                       r'\(par. 533\) not sent$'):
         parameters.read(533)
     assert line.sent == []
 
