@@ -187,3 +187,16 @@ def test_a_device_without_parameter_access_or_offline_is_refused_at_once():
     assert bus.snapshot('d1').online is False
     with pytest.raises(CommandRefused, match='is offline'):
         bus.run_parameter_service('d1', write).result(timeout=0)
+
+
+def test_a_bug_below_the_line_answers_the_job_and_the_bus_recovers_as_from_any():
+    bus, transport, clock = make_bus()
+    transport.write_error[1] = RuntimeError('termios said no')  # not a TransportError
+    future = bus.run_parameter_service('d1', write)
+    with pytest.raises(RuntimeError) as raised:
+        bus.run_once()
+    with pytest.raises(RuntimeError, match='termios said no'):
+        future.result(timeout=0)
+    bus._internal_error(raised.value)  # what the bus thread does with it
+    assert bus.internal_errors == 1 and bus.snapshot('d1').online is False
+    assert transport.parameter_requests() == [WriteRegister(ADDRESS, 400)]  # no read back
