@@ -26,7 +26,7 @@ The process around it (``main``, the exit signals) is :mod:`drive_bridge.ros.pro
 
 from typing import Any, Optional
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.errors import ConfigError
 from drive_bridge.ros import logs
 from drive_bridge.ros.command_inputs import CommandInputs

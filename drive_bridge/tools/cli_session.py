@@ -18,20 +18,20 @@ import sys
 import time
 from typing import Any, Callable, Dict, NamedTuple, Optional, Sequence, Tuple
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.device import BusDevice
 from drive_bridge.bus.runner import retryable, run_poll, TransactionRunner
+from drive_bridge.config import model as cfg
 from drive_bridge.console import parse_integer
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import DeviceReading, ParameterAccess, ParameterOptions
-from drive_bridge.devices.drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
+from drive_bridge.devices.fc_profile_drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
 from drive_bridge.devices.parameters import DATA_TYPES, parameter_address, ParameterSpec, TEXT
 from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.errors import (
     ConfigError, DeviceException, LinkDown, ModelMismatch, MonitorOnly, NoResponse,
     ProtocolError, TransportError)
-from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.fc_profile import StatusWord
 from drive_bridge.protocol.requests import ReadCoils, ReadRegisters
 from drive_bridge.protocol.words import coils_to_words
 from drive_bridge.tools.cli_target import CliError, EXIT_INTERRUPTED, EXIT_USAGE, make_bus

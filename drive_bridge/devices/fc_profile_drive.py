@@ -23,9 +23,9 @@ from drive_bridge.devices.parameters import (
     decode_value, encode_value, parameter_address, ParameterSpec, TEXT)
 from drive_bridge.errors import (
     CommandRefused, ConfigError, DeviceException, ModelMismatch, ProtocolError)
-from drive_bridge.protocol import fc_control, fc_scaling
+from drive_bridge.protocol import fc_profile, fc_profile_scaling
 from drive_bridge.protocol.commands import Command
-from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.fc_profile import StatusWord
 from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, Request, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.protocol.words import coils_to_words, words_to_coils
@@ -46,7 +46,7 @@ def witnesses(status: StatusWord) -> Dict[str, bool]:
     alarm word read before a trip does not name that trip, nor one read during a trip the
     state after the reset), and it is read at once when it has something or is not current.
     """
-    return {'alarm_word': status.tripped, 'warning_word': status.flag(fc_control.STW_WARNING)}
+    return {'alarm_word': status.tripped, 'warning_word': status.flag(fc_profile.STW_WARNING)}
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ def control_word_for(steady: Optional[Command]) -> Optional[int]:
     """Return the FC-profile control word that carries ``steady`` (None: write nothing)."""
     if steady is None:
         return None
-    return fc_control.COMMAND_WORDS.get(steady, fc_control.RAMP_STOP_WORD)
+    return fc_profile.COMMAND_WORDS.get(steady, fc_profile.RAMP_STOP_WORD)
 
 
 class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
@@ -273,13 +273,14 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         status = StatusWord(status_word)
         if not commanded_run:
             self.reached_reference = False
-        elif status.flag(fc_control.STW_RUNNING) and status.flag(fc_control.STW_ON_REFERENCE):
+        elif status.flag(fc_profile.STW_RUNNING) and status.flag(fc_profile.STW_ON_REFERENCE):
             # Running on reference: a drive that has not started yet reads "on reference"
             # too (stopped at its output), which must not end 'starting' before it began.
             self.reached_reference = True
         reading = DeviceReading(
             state=status.state(commanded_run, self.reached_reference),
-            status_word=status_word, speed_feedback_pct=fc_scaling.word_to_percent(actual_word))
+            status_word=status_word,
+            speed_feedback_pct=fc_profile_scaling.word_to_percent(actual_word))
         self._fill_readouts(reading)
         self._fill_trip(reading, status)
         self._fill_details(reading, status, actual_word, control)
@@ -302,7 +303,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         code, name = self.trip_from_alarm_word(reading.alarm_word)
         reading.trip_code, reading.trip_name = code, name
         locked = ' (trip locked: cycle the mains power)' if \
-            status.flag(fc_control.STW_TRIP_LOCKED) else ''
+            status.flag(fc_profile.STW_TRIP_LOCKED) else ''
         reading.fault = f'tripped: {name}{locked}'
 
     def trip_from_alarm_word(self, alarm_word: Optional[int]) -> Tuple[int, str]:
@@ -321,7 +322,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         details['main_actual_value'] = f'0x{actual_word:04X}'
         details['control_word_sent'] = self.describe_control(control)
         details['reference_word'] = f'0x{control.reference_word:04X}'
-        details['reference_pct'] = f'{fc_scaling.word_to_percent(control.reference_word):g}'
+        details['reference_pct'] = f'{fc_profile_scaling.word_to_percent(control.reference_word):g}'
         for name in self.readouts:
             value = self.current(name)
             if value is not None:
@@ -357,9 +358,9 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         reset never restarts a motor.
         """
         if command is Command.RESET:
-            word = fc_control.RAMP_STOP_WORD
-            return fc_control.with_reset(word), word
-        word = fc_control.COMMAND_WORDS.get(command)
+            word = fc_profile.RAMP_STOP_WORD
+            return fc_profile.with_reset(word), word
+        word = fc_profile.COMMAND_WORDS.get(command)
         if word is None:
             raise CommandRefused(f'drives have no {command.value} command (allowed: start, '
                                  'stop, quick_stop, coast_stop, reset)')
@@ -368,7 +369,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
     def reference_word(self, percent: float) -> int:
         """Return the reference word of ``percent`` (FC scaling); raise CommandRefused."""
         try:
-            return fc_scaling.percent_to_word(percent)
+            return fc_profile_scaling.percent_to_word(percent)
         except (ValueError, TypeError) as error:
             raise CommandRefused(f'{error}: nothing sent') from None
 
@@ -377,7 +378,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         return self.data.explain_exception(code, detail)
 
 
-class DriveProfile(FcProfileDrive, ParameterAccess):
+class FcProfileModbusDrive(FcProfileDrive, ParameterAccess):
     """
     An FC-profile drive over Modbus RTU: FC 51 built-in, VLT 5000/6000 option card.
 
@@ -572,7 +573,7 @@ CURRENT_PARAMETER = Setting(
 
 def make_drive_profile(data: DriveFamilyData) -> Callable[[str, str, Mapping[str, Any]],
                                                           DeviceProfile]:
-    """Return the profile factory of a drive family (Modbus RTU: :class:`DriveProfile`)."""
+    """Return the profile factory of a drive family (Modbus RTU: :class:`FcProfileModbusDrive`)."""
     def make(model: str, protocol: str, options: Mapping[str, Any]) -> DeviceProfile:
         overrides = {'motor_current': options['current_parameter']} \
             if options.get('current_parameter') else {}
@@ -585,5 +586,5 @@ def make_drive_profile(data: DriveFamilyData) -> Callable[[str, str, Mapping[str
                 raise ConfigError("drive_link_timeout is the Modbus option card's register 3: "
                                   'on the FC protocol there is no card; leave it at 0')
             return FcProtocolDriveProfile(*common)
-        return DriveProfile(*common, options.get('drive_link_timeout', 0.0))
+        return FcProfileModbusDrive(*common, options.get('drive_link_timeout', 0.0))
     return make
