@@ -2,8 +2,8 @@
 Bytes and line time per poll: the Danfoss FC protocol against Modbus RTU, same drive data.
 
 Both sides are computed from the encoders, not from formulas. Modbus RTU: the transactions
-:class:`drive_bridge.devices.fc_profile_drive.FcProfileModbusDrive` plans for a started FC 51 today (one 0F
-write of coils 1-32, one 01 read of coils 33-64, one 03 read of 16-14, one rotating
+:class:`drive_bridge.devices.fc_profile_drive.FcProfileModbusDrive` plans for a started FC 51
+today (one 0F write of coils 1-32, one 01 read of coils 33-64, one 03 read of 16-14, one rotating
 readout), each request and reply encoded by :mod:`drive_bridge.protocol.rtu`; line time
 with a 3.5-character gap before each frame. FC protocol: one telegram carrying control word,
 reference, status word, main actual value and one parameter read (16-14), and, for the

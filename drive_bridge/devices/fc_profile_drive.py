@@ -51,7 +51,8 @@ def witnesses(status: StatusWord) -> Dict[str, bool]:
 
 @dataclass(frozen=True)
 class DriveFamilyData:
-    """Everything that tells one drive family from another; see :mod:`fc` and :mod:`vlt`."""
+    """Everything that tells one drive family from another; see :mod:`~drive_bridge.devices.fc51` and
+    :mod:`~drive_bridge.devices.vlt`."""
 
     name: str
     models: Tuple[str, ...]
@@ -322,7 +323,8 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         details['main_actual_value'] = f'0x{actual_word:04X}'
         details['control_word_sent'] = self.describe_control(control)
         details['reference_word'] = f'0x{control.reference_word:04X}'
-        details['reference_pct'] = f'{fc_profile_scaling.word_to_percent(control.reference_word):g}'
+        reference_pct = fc_profile_scaling.word_to_percent(control.reference_word)
+        details['reference_pct'] = f'{reference_pct:g}'
         for name in self.readouts:
             value = self.current(name)
             if value is not None:

@@ -1,5 +1,5 @@
 """
-The FC-protocol face of a simulated drive, onto the same :class:`FcProfileModel` as the Modbus faces.
+The FC-protocol face of a simulated drive, onto the :class:`FcProfileModel` of the Modbus faces.
 
 So a VLT 5000/6000 or an FC 51 behaves the same whichever protocol talks to it. Every
 telegram's PCD1/PCD2 go to :meth:`FcProfileModel.write_control` (the model obeys the control word

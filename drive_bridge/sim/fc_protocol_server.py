@@ -2,9 +2,9 @@
 A simulated RS-485 line of drives speaking the Danfoss FC protocol, on a pty or TCP.
 
 Several :class:`~drive_bridge.sim.fc_protocol_device.FcProtocolDevice` faces of
-:class:`~drive_bridge.sim.fc_profile_model.FcProfileModel` (FC 51, VLT 5000, VLT 6000) share one line, as
-a multidrop bus does: a telegram for an address nobody serves, a broadcast, or a telegram
-with a bad BCC gets no reply (confirmed: "only a slave that has received an error-free
+:class:`~drive_bridge.sim.fc_profile_model.FcProfileModel` (FC 51, VLT 5000, VLT 6000) share
+one line, as a multidrop bus does: a telegram for an address nobody serves, a broadcast, or a
+telegram with a bad BCC gets no reply (confirmed: "only a slave that has received an error-free
 telegram addressed to that slave can send a response telegram"; broadcasts are executed
 without a reply). TCP carries the same raw bytes (a transparent serial server).
 

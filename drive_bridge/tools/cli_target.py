@@ -3,9 +3,9 @@ What a ``drive-bridge`` command talks to: the bus and the device, from ``--confi
 
 The parameters file is checked as the node checks it (a name the node refuses, such as a
 misspelled ``baud_rate``, is refused here in the node's words:
-:func:`drive_bridge.config.node_parameters.check_parameters_block`); options win over the file. An option
-whose value does not fit is refused naming the option as it was typed (``--address 300:
-allowed 1-247 for fc``), never the setting it becomes inside.
+:func:`drive_bridge.config.node_parameters.check_parameters_block`); options win over the
+file. An option whose value does not fit is refused naming the option as it was typed
+(``--address 300: allowed 1-247 for fc``), never the setting it becomes inside.
 """
 
 import argparse

@@ -343,7 +343,8 @@ def test_wire_pacing_holds_the_reply_to_the_line_time():
 
 
 def test_the_console_describes_trips_and_faults_a_drive_on_the_fc_protocol():
-    # It took an FC-protocol drive for a starter ('FcProfileModel' object has no attribute 'state').
+    # It took an FC-protocol drive for a starter
+    # ('FcProfileModel' object has no attribute 'state').
     server = make_fc_protocol_server({1: 'fc51'})
     assert sim_cli.run_console_command(server, 'status').startswith('1: fc51 output 0.0 %')
     assert 'local True' in sim_cli.run_console_command(server, 'hand 1 on')

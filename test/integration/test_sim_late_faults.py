@@ -435,8 +435,8 @@ def test_a_late_fc_reply_comes_after_the_timeout_and_the_line_is_served_meanwhil
     assert control_word(server, FC51) == START_WORD  # taken, not yet answered
     replies += master.replies(1)
     assert [(reply.unit, reply.kind) for reply in replies] == [
-        (VLT5000, fc_telegram.LGE_PARAMETER), (FC51, fc_telegram.LGE_PARAMETER), (FC51,
-                                                                                  fc_telegram.LGE_PROCESS)]
+        (VLT5000, fc_telegram.LGE_PARAMETER), (FC51, fc_telegram.LGE_PARAMETER),
+        (FC51, fc_telegram.LGE_PROCESS)]
     late = replies[2].at_s - sent_s
     assert late_by_s() <= late < late_by_s() + READ_TIMEOUT_S / 2, late
     assert server.faults.totals() == {'late': 1}

@@ -20,8 +20,8 @@ VECTORS = [START_REQUEST, START_REPLY, READ_520_REQUEST, READ_520_REPLY]
 
 
 def test_start_at_50_percent_encodes_byte_exact():
-    request = fc_telegram.process_request(0x047C, 0x2000).telegram(4,
-                                                                   fc_telegram.ADDRESS_FORMAT_31)
+    request = fc_telegram.process_request(0x047C, 0x2000).telegram(
+        4, fc_telegram.ADDRESS_FORMAT_31)
     assert request.encode() == START_REQUEST
     assert request.lge == 6 and request.pke is None
 
@@ -58,8 +58,8 @@ def test_fc300_guide_16_14_example_has_its_ak_nibble_dropped():
     printed_reply = bytes.fromhex('02 0E 01 06 4E 00 00 00 00 02 0C 06 07 00 00 4A')
     assert fc_telegram.decode(printed_request).telegram.pke == 0x064E
     assert fc_telegram.decode(printed_reply).telegram.ak == fc_telegram.AK_REPLY_NONE
-    read = fc_telegram.read_parameter_request(1614).telegram(1,
-                                                             fc_telegram.ADDRESS_FORMAT_31).encode()
+    read = fc_telegram.read_parameter_request(1614).telegram(
+        1, fc_telegram.ADDRESS_FORMAT_31).encode()
     assert read[3:5] == bytes.fromhex('164E') and read[-1] == 0x55
     reply = fc_telegram.reply_to(fc_telegram.decode(read).telegram, 0x0607, 0,
                                  fc_telegram.AK_REPLY_DOUBLE, 524)
@@ -76,7 +76,8 @@ def test_additional_text_reply_decodes_as_a_text_block():
 
 
 def test_bcc_worked_example_and_zero_over_a_whole_telegram():
-    assert fc_telegram.bcc(b'\x02') == 0x02 and fc_telegram.bcc(b'\x02\xD6') == 0xD4  # "Data control byte"
+    # "Data control byte"
+    assert fc_telegram.bcc(b'\x02') == 0x02 and fc_telegram.bcc(b'\x02\xD6') == 0xD4
     for vector in VECTORS:
         assert fc_telegram.bcc(vector[:-1]) == vector[-1] and fc_telegram.bcc(vector) == 0
 
@@ -207,8 +208,8 @@ def test_replies_are_checked_against_their_request():
                                                         reply)
     spm = FcTelegram(1, pke=0x2000 | 0x800 | 520, pwe=524)  # bit 11: VLT unused
     assert fc_telegram.reply_problem(read, spm) == ''
-    assert 'process-data reply' in fc_telegram.reply_problem(read,
-                                                             fc_telegram.decode(START_REPLY).telegram)
+    assert 'process-data reply' in fc_telegram.reply_problem(
+        read, fc_telegram.decode(START_REPLY).telegram)
     assert 'parameter reply' in fc_telegram.reply_problem(fc_telegram.process_request(0, 0), reply)
     error = fc_telegram.error_reply(fc_telegram.decode(READ_520_REQUEST).telegram, 17, 0x0607, 0)
     assert fc_telegram.reply_problem(read,
@@ -226,7 +227,8 @@ def test_error_codes_read_as_words():
 def test_timing_at_9600_8e1():
     assert fc_telegram.character_time_s() == pytest.approx(11 / 9600)
     # VLT 5000 Crane instructions: 16 characters at 9600 baud within 27.5 ms (1.5 x).
-    assert fc_telegram.TELEGRAM_TIME_FACTOR * fc_telegram.telegram_time_s(16) == pytest.approx(0.0275)
+    assert fc_telegram.TELEGRAM_TIME_FACTOR * fc_telegram.telegram_time_s(16) == \
+        pytest.approx(0.0275)
     assert fc_telegram.transaction_wire_time_s(16, 16) == pytest.approx(36 * 11 / 9600)
     assert fc_telegram.reply_deadline_s(16) == pytest.approx(0.0775)
 
