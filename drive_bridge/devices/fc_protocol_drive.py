@@ -26,7 +26,8 @@ from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, ParameterAccess, ParameterOptions, ParameterPlan, PollCycle,
     PollShape, PollStep, SlowReadouts)
 from drive_bridge.devices.fc_profile_drive import (
-    ALWAYS_READ, control_word_for, DriveFamilyData, FcProfileDrive, timeout_parameters)
+    control_word_for, DriveFamilyData, FcProfileDrive, timeout_parameters)
+from drive_bridge.devices.fc_profile_reading import ALWAYS_READ
 from drive_bridge.devices.parameters import (
     DATA_TYPES, decode_value, encode_value, ParameterSpec, TEXT)
 from drive_bridge.errors import CommandRefused, ConfigError, DeviceException, ProtocolError
