@@ -3,10 +3,10 @@ The parameters of a simulated FC-profile drive: stored values and their register
 
 The drive model (:class:`~drive_bridge.sim.fc_profile_model.FcProfileModel`) owns the behaviour
 and the live readouts; this store owns every settable parameter's raw value, how many
-registers each takes, the text parameters and the option card's index register (IND), and answers a read
-or a write with the detail code of register 7 when it fails (manual 004 section 5.3.2).
-The model hands it what only the model knows: a readout's live value, whether the output
-runs.
+registers each takes, the text parameters and the option card's index register (IND), and
+answers a read or a write with the detail code of register 7 when it fails (manual 004
+section 5.3.2). The model hands it what only the model knows: a readout's live value,
+whether the output runs.
 """
 
 from typing import Dict, Mapping, Optional
