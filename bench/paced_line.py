@@ -87,7 +87,7 @@ class NodeProcess:
     """``drive_bridge_node`` in a subprocess with a params file for ``bus`` and ``devices``."""
 
     def __init__(self, bus: Dict, devices: Dict[str, Dict],
-                 main: Sequence[str] = ('-m', 'drive_bridge.ros.entry'), source: str = ''):
+                 main: Sequence[str] = ('-m', 'drive_bridge.ros.node.entry'), source: str = ''):
         """
         Start the node; ``main``: the interpreter arguments that run it.
 

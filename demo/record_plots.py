@@ -132,9 +132,9 @@ def record(args: argparse.Namespace) -> None:
     assert sim.stdout.readline().startswith('pty:')
     params = write_params_file(os.path.join(os.path.dirname(link), 'params.yaml'),
                                dict(BUS, port=link), DEVICES)
-    bridge = start([sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args',
+    bridge = start([sys.executable, '-m', 'drive_bridge.ros.node.entry', '--ros-args',
                     '--params-file', params, '-r', f'__ns:={NAMESPACE}'])
-    recorder = start([sys.executable, '-m', 'drive_bridge.ros.record', '--all', '--namespace',
+    recorder = start([sys.executable, '-m', 'drive_bridge.ros.record.cli', '--all', '--namespace',
                       NAMESPACE, '-o', args.bag])
     rclpy.init()
     session = Session()

@@ -36,7 +36,7 @@ def start_node(params_file: str, namespace: str = '',
     non-interactive shell's background job inherits SIGINT ignored). ``remaps``: more
     ``-r FROM:=TO`` rules.
     """
-    command = [sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args',
+    command = [sys.executable, '-m', 'drive_bridge.ros.node.entry', '--ros-args',
                '--params-file', params_file]
     if namespace:
         command += ['-r', f'__ns:={namespace}']

@@ -103,7 +103,7 @@ PROFILE_SETTINGS: Tuple[Setting, ...] = (
 )
 # Families that take a speed reference (drives) take these too: the reference and its
 # deadman, and the ros2_control joint settings (~/joint_states, ~/joint_commands: see
-# drive_bridge.ros.joints).
+# drive_bridge.ros.node.joints).
 SPEED_REFERENCE_SETTINGS: Tuple[Setting, ...] = (
     Setting('speed_reference', float, 0.0,
             'drives: the bus speed reference in percent (FC scaling, 0x4000 = 100 %; negative '
@@ -130,7 +130,7 @@ JOINT_SETTINGS: Tuple[Setting, ...] = (
 )
 REFERENCE_SETTINGS: Tuple[Setting, ...] = SPEED_REFERENCE_SETTINGS + JOINT_SETTINGS
 # The node's own settings (not the bus's): a parameters file may hold them; declared by
-# drive_bridge.ros.parameters.
+# drive_bridge.ros.node.parameters.
 NODE_SETTINGS: Tuple[Setting, ...] = (
     Setting('autostart', bool, True,
             'walk the lifecycle to active at start (false: wait for configure and activate)'),

@@ -182,7 +182,8 @@ def test_aggregator_config_groups_every_drive_bridge_status():
         parameters = yaml.safe_load(stream)['/**/analyzers']['ros__parameters']
     group = parameters['drives']
     assert group['type'] == 'diagnostic_aggregator/GenericAnalyzer'
-    # Status names: 'drive_bridge: <device>', or '/<ns>/drive_bridge: <device>' (ros/diagnostics).
+    # Status names: 'drive_bridge: <device>', or '/<ns>/drive_bridge: <device>'
+    # (ros/node/diagnostics).
     assert group['contains'] == ['drive_bridge: ']
     for name in (status_name('/drive_bridge', 'feeder'),
                  status_name('/line1/drive_bridge', 'feeder')):

@@ -66,7 +66,7 @@ def test_a_file_that_is_no_yaml_text_is_refused_in_one_line(tmp_path, content, e
 
 def _parser_of(module_name: str):
     """Return the argument parser of one of the package's terminal commands."""
-    if module_name == 'drive_bridge.ros.record':
+    if module_name == 'drive_bridge.ros.record.cli':
         pytest.importorskip('rclpy')
     module = __import__(module_name, fromlist=['build_parser'])
     return module.build_parser()
@@ -85,7 +85,7 @@ def _parser_of(module_name: str):
     ('drive_bridge.tools.cli', [], 'the following arguments are required: COMMAND'),
     ('drive_bridge.sim.cli', ['--nope'], 'unrecognized arguments: --nope'),
     ('drive_bridge.tools.plot_recording', [], 'the following arguments are required'),
-    ('drive_bridge.ros.record', ['--zz'], 'unrecognized arguments: --zz'),
+    ('drive_bridge.ros.record.cli', ['--zz'], 'unrecognized arguments: --zz'),
 ])
 def test_a_refused_command_line_is_one_line_and_exit_status_2(module_name, argv, reason,
                                                               capsys):

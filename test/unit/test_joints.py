@@ -21,7 +21,7 @@ from fakes import FakeClock, kind, run_for
 import pytest
 
 # rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-joints = pytest.importorskip('drive_bridge.ros.joints', reason='ROS 2 (rclpy) from PyPI')
+joints = pytest.importorskip('drive_bridge.ros.node.joints', reason='ROS 2 (rclpy) from PyPI')
 JointState = pytest.importorskip('sensor_msgs.msg').JointState
 
 DRIVE = {'family': 'fc', 'model': 'fc51', 'address': 1}

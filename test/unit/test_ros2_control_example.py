@@ -21,7 +21,7 @@ import pytest
 import yaml
 
 # Neither is in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-joints = pytest.importorskip('drive_bridge.ros.joints', reason='ROS 2 (rclpy) from PyPI')
+joints = pytest.importorskip('drive_bridge.ros.node.joints', reason='ROS 2 (rclpy) from PyPI')
 xacro = pytest.importorskip('xacro', reason='pip install xacro')
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..'))
