@@ -15,7 +15,7 @@ import tempfile
 import time
 from typing import Dict, List, Sequence, Tuple
 
-from drive_bridge.config import write_params_file
+from drive_bridge.config.params_file import write_params_file
 from drive_bridge.sim.wire_pacer import LineTiming, transactions, wire_fraction, WirePacer
 
 TEST_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'test')

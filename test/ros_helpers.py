@@ -10,7 +10,7 @@ import time
 from typing import Dict, Iterator, List, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
-from drive_bridge.config import write_params_file
+from drive_bridge.config.params_file import write_params_file
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 import rclpy

@@ -29,12 +29,12 @@ family". A device already polled (the node's) tells what it is without a transac
 from typing import Any, Dict, NamedTuple, Optional, Protocol, Tuple
 
 from drive_bridge.devices.contracts import DeviceProfile, DeviceReading
-from drive_bridge.devices.drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
+from drive_bridge.devices.fc_profile_drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
 from drive_bridge.devices.parameters import parameter_address
 from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.errors import (
     DeviceException, LinkDown, ModelMismatch, NoResponse, ProtocolError, TransportError)
-from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.fc_profile import StatusWord
 from drive_bridge.protocol.requests import ReadCoils, ReadRegisters, Request
 from drive_bridge.protocol.words import coils_to_words
 

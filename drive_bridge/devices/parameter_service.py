@@ -52,7 +52,7 @@ from drive_bridge.console import parse_integer
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import DeviceProfile, ParameterAccess, ParameterOptions
-from drive_bridge.devices.drive import FcProfileDrive
+from drive_bridge.devices.fc_profile_drive import FcProfileDrive
 from drive_bridge.devices.parameters import check_value, ParameterSpec, Value
 from drive_bridge.errors import (
     CommandRefused, DriveBridgeError, MonitorOnly, ProtocolError, ReadBackFailed, ReadBackMismatch)

@@ -35,7 +35,7 @@ import sys
 import textwrap
 from typing import List, Optional
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE, integer_argument, \
     number_argument, OneLineParser, parse_integer, parse_number
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError, ModelMismatch

@@ -10,9 +10,9 @@ session opened), and the words a command says when the answer is another family.
 import time
 from typing import Any, Dict, Optional, Tuple
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.device import BusDevice
 from drive_bridge.bus.runner import run_poll, TransactionRunner
+from drive_bridge.config import model as cfg
 from drive_bridge.devices import identification
 from drive_bridge.devices.contracts import DeviceProfile, DeviceReading
 from drive_bridge.devices.identification import Answer

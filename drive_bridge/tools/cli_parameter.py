@@ -10,7 +10,7 @@ from typing import Any, Optional
 
 from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import ParameterOptions
-from drive_bridge.devices.drive import FcProfileDrive
+from drive_bridge.devices.fc_profile_drive import FcProfileDrive
 from drive_bridge.devices.parameter_service import ParameterService
 from drive_bridge.devices.parameters import ParameterSpec
 from drive_bridge.tools.cli_session import (

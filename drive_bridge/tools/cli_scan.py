@@ -9,8 +9,8 @@ a hint says what to do, and the exit status is 1.
 
 from typing import Any, Dict, Tuple
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.runner import TransactionRunner
+from drive_bridge.config import model as cfg
 from drive_bridge.console import parse_integer
 from drive_bridge.tools import doctor_search
 from drive_bridge.tools.cli_identify import identify, scan_families

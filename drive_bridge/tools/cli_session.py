@@ -22,9 +22,9 @@ import sys
 import time
 from typing import Any, Callable, Dict, Optional, Sequence
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.device import BusDevice
 from drive_bridge.bus.runner import retryable, run_poll, TransactionRunner
+from drive_bridge.config import model as cfg
 from drive_bridge.devices.contracts import DeviceReading, ParameterOptions
 from drive_bridge.devices.identification import Answer, IDENTIFIED_FAMILIES
 from drive_bridge.devices.parameter_service import ParameterService

@@ -16,7 +16,7 @@ import math
 import os
 from typing import Callable, Dict, List, Optional, Sequence
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.console import parse_integer
 from drive_bridge.tools import doctor_search as found
 from drive_bridge.tools.cli_identify import scan_families

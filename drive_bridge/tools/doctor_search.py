@@ -14,7 +14,7 @@ from contextlib import contextmanager
 import logging
 from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.devices.identification import Answer
 from drive_bridge.errors import ConfigError
 from drive_bridge.tools.cli_identify import identify, scan_families

@@ -11,7 +11,7 @@ import sys
 import time
 from typing import List
 
-from drive_bridge.protocol.fc_scaling import percent_to_word
+from drive_bridge.protocol.fc_profile_scaling import percent_to_word
 from drive_bridge.sim.devices import make_sim_server
 from integration_helpers import first_line_then_reader_gone
 import pytest

@@ -2,7 +2,7 @@
 
 import math
 
-from drive_bridge import config
+from drive_bridge.config.params_file import load_yaml_file
 from drive_bridge.console import parse_integer, parse_number
 from drive_bridge.errors import ConfigError
 from drive_bridge.settings import MAX_SHOWN_CHARACTERS, shown
@@ -60,7 +60,7 @@ def test_a_file_that_is_no_yaml_text_is_refused_in_one_line(tmp_path, content, e
     path = tmp_path / 'line.yaml'
     path.write_bytes(content)
     with pytest.raises(ConfigError) as refused:
-        config.load_yaml_file(str(path), 'the file')
+        load_yaml_file(str(path), 'the file')
     assert str(refused.value) == f'the file {expected}'
 
 

@@ -1,8 +1,8 @@
 """Unit tests of identification (devices/): what answers at an address, over a fake probe line."""
 
-from drive_bridge.devices import fc
+from drive_bridge.devices import fc51
 from drive_bridge.devices import identification as found
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
 from drive_bridge.errors import LinkDown
 import pytest
 from sim_seams import sim_wire, SimProbeLine
@@ -79,7 +79,7 @@ def test_a_drive_that_does_not_tell_its_fc_type_is_named_as_a_possible_vlt():
 
 
 def test_unknown_drive_type_says_when_the_type_is_not_readable():
-    profile = DriveProfile(fc.DATA, 'auto')
+    profile = FcProfileModbusDrive(fc51.DATA, 'auto')
     profile.identity['drive_type'] = 'not readable (exception code 02)'
     assert '(par. 15-40 not readable)' in found.unknown_drive_type(profile, 'ready')
     profile.identity['drive_type'] = 'FC-051PK75T4E20H3BXCXXXSXXXX'

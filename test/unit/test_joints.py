@@ -7,9 +7,9 @@ are collected instead of published.
 
 import math
 
-from drive_bridge import config
 from drive_bridge.bus.events import ReadingEvent
 from drive_bridge.bus.master import BusMaster, BusTiming
+from drive_bridge.config import model as config
 from drive_bridge.devices.contracts import DeviceReading
 from drive_bridge.errors import ConfigError, NoResponse
 from drive_bridge.protocol import words

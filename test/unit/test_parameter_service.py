@@ -1,8 +1,8 @@
 """Unit tests of the parameter service (devices/), over a fake line to a simulated device."""
 
-from drive_bridge.devices import fc, vlt
+from drive_bridge.devices import fc51 as fc51_family, vlt
 from drive_bridge.devices.contracts import ParameterOptions
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
 from drive_bridge.devices.lvsg import LvsgProfile
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.devices.parameter_service import ParameterService, parse_parameter_number
@@ -21,7 +21,7 @@ def service(model, profile, writes_allowed=True, name='feeder'):
 
 
 def fc51(writes_allowed=True, model='fc51'):
-    return service('fc51', DriveProfile(fc.DATA, model), writes_allowed)
+    return service('fc51', FcProfileModbusDrive(fc51_family.DATA, model), writes_allowed)
 
 
 def writes(line):
@@ -93,7 +93,7 @@ def test_a_write_goes_to_ram_is_read_back_and_asks_the_line_first():
     parameters, line, device = fc51()
     assert parameters.write(RAMP_UP, 7.5) == pytest.approx(7.5)
     assert device.parameters[RAMP_UP] == 750
-    assert writes(line)[0] == WriteCoil(fc.DATA.eeprom_coil, False)  # RAM only
+    assert writes(line)[0] == WriteCoil(fc51_family.DATA.eeprom_coil, False)  # RAM only
     assert line.calls.index('check_before_writing') < line.calls.index('run')
     assert not line.sent[-1].writes  # the read-back comes last
 
@@ -101,7 +101,7 @@ def test_a_write_goes_to_ram_is_read_back_and_asks_the_line_first():
 def test_eeprom_on_request_sets_the_store_coil_before_the_write():
     parameters, line, device = fc51()
     parameters.write(RAMP_UP, 9.0, ParameterOptions(eeprom=True))
-    assert writes(line)[0] == WriteCoil(fc.DATA.eeprom_coil, True)
+    assert writes(line)[0] == WriteCoil(fc51_family.DATA.eeprom_coil, True)
     assert device.parameters[RAMP_UP] == 900
 
 
@@ -132,7 +132,7 @@ def test_a_monitor_only_device_gets_no_write_and_nothing_of_its_plan():
 
 
 def test_a_vlt_text_read_writes_its_index_so_a_monitor_only_vlt_refuses_it():
-    profile = DriveProfile(vlt.DATA, 'vlt6000')
+    profile = FcProfileModbusDrive(vlt.DATA, 'vlt6000')
     parameters, line, _ = service('vlt6000', profile, writes_allowed=False, name='fan')
     with pytest.raises(MonitorOnly, match=r'^fan is monitor only .*: read Display Text 1 '
                        r'\(par. 533\) not sent$'):

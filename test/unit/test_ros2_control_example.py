@@ -16,7 +16,7 @@ import sys
 import types
 from xml.etree import ElementTree
 
-from drive_bridge import config
+from drive_bridge.config import model as config
 import pytest
 import yaml
 

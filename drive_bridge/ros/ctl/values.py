@@ -9,7 +9,7 @@ bridge node's namespace, and a message printed as ``ros2 topic echo`` prints it.
 import math
 from typing import Any, List, Tuple
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.console import parse_integer, parse_number
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rclpy.exceptions import InvalidNamespaceException, InvalidNodeNameException, \

@@ -28,7 +28,7 @@ closed, the bus session (:mod:`~drive_bridge.ros.node.session`) with one interfa
 
 from typing import Any, Optional
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.errors import ConfigError
 from drive_bridge.ros.node import logs
 from drive_bridge.ros.node.command_inputs import CommandInputs

@@ -17,9 +17,9 @@ import functools
 import threading
 import time
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.events import BusEvent
 from drive_bridge.bus.master import DeviceSnapshot
+from drive_bridge.config import model as cfg
 from drive_bridge.errors import CommandRefused, DriveBridgeError
 from drive_bridge.protocol.commands import Command
 from drive_bridge.ros.node.bus_events import publish_event

@@ -15,8 +15,9 @@ monitor-only device into one that takes commands.
 import time
 from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusMaster
+from drive_bridge.config import model as cfg
+from drive_bridge.config.node_parameters import bus_parameter_names, check_unknown_parameters
 from drive_bridge.errors import CommandRefused, ConfigError
 from drive_bridge.settings import check_value, Setting
 from rcl_interfaces.msg import (
@@ -58,7 +59,7 @@ class ParameterDeclarations:
         protocol = self._declare(cfg.BUS_SETTINGS[0], 'protocol')
         settings = {setting.name: setting for setting in cfg.BUS_SETTINGS}
         bus_values = {'protocol': protocol}
-        for name in cfg.bus_parameter_names(protocol):
+        for name in bus_parameter_names(protocol):
             if name in settings and name != 'protocol':
                 bus_values[name] = self._declare(settings[name], name)
         names = bus_values.get('devices') or []
@@ -67,7 +68,7 @@ class ParameterDeclarations:
                               'list of device names')
         cfg.check_device_names(names)
         device_values = {name: self._declare_device(name) for name in names}
-        cfg.check_unknown_parameters(
+        check_unknown_parameters(
             self._overrides(), self._node.has_parameter, names, protocol,
             {name: values['family'] for name, values in device_values.items()})
         return cfg.build_config(bus_values, device_values)

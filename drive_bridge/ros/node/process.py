@@ -15,7 +15,7 @@ import sys
 import threading
 from typing import List, Optional
 
-from drive_bridge import config as cfg
+from drive_bridge.config.params_file import check_params_files
 from drive_bridge.errors import ConfigError
 from drive_bridge.ros.node.bridge_node import DriveBridgeNode
 from drive_bridge.ros.node.exit_signals import ExitSignals
@@ -65,7 +65,7 @@ def main(args: Optional[List[str]] = None) -> int:
         print(USAGE)
         return 0
     try:
-        cfg.check_params_files(argv)
+        check_params_files(argv)
     except ConfigError as error:
         _configuration_error(str(error))
         return 2

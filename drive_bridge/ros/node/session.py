@@ -19,9 +19,9 @@ from contextlib import contextmanager
 import threading
 from typing import Dict, Iterator, List, Optional, TYPE_CHECKING
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.events import BusEvent
 from drive_bridge.bus.master import BusMaster
+from drive_bridge.config import model as cfg
 from drive_bridge.ros.node.device_interface import CommandPaths, DeviceInterface
 from drive_bridge.ros.node.device_parameters.nodes import DeviceParameterNodes
 from rclpy.lifecycle import LifecycleNode

@@ -19,11 +19,11 @@ from concurrent.futures import Future
 from dataclasses import replace
 from typing import Any, Callable, Dict, List, Optional
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusMaster
+from drive_bridge.config import model as cfg
 from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import ParameterAccess, ParameterOptions
-from drive_bridge.devices.drive import FcProfileDrive
+from drive_bridge.devices.fc_profile_drive import FcProfileDrive
 from drive_bridge.devices.remote_parameters import remote_parameters, RemoteParameter
 from drive_bridge.errors import ReadBackMismatch
 from drive_bridge.ros.node.device_parameters.cache import ValueCache

@@ -19,8 +19,8 @@ refresh sees) goes out on ``/parameter_events`` with this node's full name.
 
 from typing import Any
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusMaster
+from drive_bridge.config import model as cfg
 from drive_bridge.devices.remote_parameters import RemoteParameter
 from drive_bridge.ros.node.device_parameters import messages
 from drive_bridge.ros.node.device_parameters.device import DeviceParameters

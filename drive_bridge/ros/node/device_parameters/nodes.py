@@ -13,8 +13,8 @@ import sys
 import threading
 from typing import Dict, List, Optional
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusMaster
+from drive_bridge.config import model as cfg
 from drive_bridge.ros.node.device_parameters.device import has_parameters
 from drive_bridge.ros.node.device_parameters.device_node import DeviceParameterNode
 from drive_bridge.ros.node.gate import CommandGate

@@ -2,8 +2,8 @@
 
 from typing import Callable, Optional, Sequence
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.master import BusMaster
+from drive_bridge.config import model as cfg
 from drive_bridge.ros.node.command_inputs import CommandInputs
 from drive_bridge.ros.node.joints.bridge import JointBridge
 from drive_bridge.ros.node.joints.model import joint_specs, JointSpec

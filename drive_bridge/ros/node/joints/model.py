@@ -4,7 +4,7 @@ from dataclasses import dataclass
 import threading
 from typing import Dict, List, Optional, Sequence, Tuple
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.ros.node.joints.auto_start import AutoStart
 
 

@@ -9,9 +9,9 @@ Other FC-series drives share this map; a new model is a new entry in ``MODELS``/
 from typing import Dict, Optional, Tuple
 
 from drive_bridge.devices.contracts import Family
-from drive_bridge.devices.drive import (
-    COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile)
 from drive_bridge.devices.fc51_parameters import FC51_PARAMETERS
+from drive_bridge.devices.fc_profile_drive import (
+    COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile)
 from drive_bridge.devices.parameters import FC_CONVERSION_FACTORS, ParameterSpec
 from drive_bridge.settings import Setting
 

@@ -16,16 +16,17 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
 from drive_bridge.devices.contracts import (
-    CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Freshness,
-    ParameterAccess, ParameterOptions, ParameterPlan, PollCycle, PollShape, PollStep,
-    SetupWrites, SlowReadouts, SpeedReference, TRIP_CODE_UNKNOWN)
+    CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, ParameterAccess,
+    ParameterOptions, ParameterPlan, PollCycle, PollShape, PollStep, SetupWrites, SlowReadouts,
+    SpeedReference)
+from drive_bridge.devices.fc_profile_reading import ALWAYS_READ, DriveReadouts, FcProfileDecoder
 from drive_bridge.devices.parameters import (
     decode_value, encode_value, parameter_address, ParameterSpec, TEXT)
 from drive_bridge.errors import (
     CommandRefused, ConfigError, DeviceException, ModelMismatch, ProtocolError)
-from drive_bridge.protocol import fc_control, fc_scaling
+from drive_bridge.protocol import fc_profile, fc_profile_scaling
 from drive_bridge.protocol.commands import Command
-from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.fc_profile import StatusWord
 from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, Request, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
 from drive_bridge.protocol.words import coils_to_words, words_to_coils
@@ -35,23 +36,15 @@ from drive_bridge.settings import Setting
 COIL_CONTROL = 0  # coils 1-16 control word, 17-32 reference
 COIL_STATUS = 32  # coils 33-48 status word, 49-64 main actual value (output frequency)
 PROCESS_COILS = 32
-ALWAYS_READ = ('motor_current',)  # every poll; the other readouts take turns
-
-
-def witnesses(status: StatusWord) -> Dict[str, bool]:
-    """
-    Return, per readout a status bit witnesses, whether the bit says it has something.
-
-    Such a readout counts only while current: read since its bit took its present value (an
-    alarm word read before a trip does not name that trip, nor one read during a trip the
-    state after the reset), and it is read at once when it has something or is not current.
-    """
-    return {'alarm_word': status.tripped, 'warning_word': status.flag(fc_control.STW_WARNING)}
 
 
 @dataclass(frozen=True)
 class DriveFamilyData:
-    """Everything that tells one drive family from another; see :mod:`fc` and :mod:`vlt`."""
+    """
+    Everything that tells one drive family from another.
+
+    See :mod:`~drive_bridge.devices.fc51` and :mod:`~drive_bridge.devices.vlt`.
+    """
 
     name: str
     models: Tuple[str, ...]
@@ -122,16 +115,18 @@ def control_word_for(steady: Optional[Command]) -> Optional[int]:
     """Return the FC-profile control word that carries ``steady`` (None: write nothing)."""
     if steady is None:
         return None
-    return fc_control.COMMAND_WORDS.get(steady, fc_control.RAMP_STOP_WORD)
+    return fc_profile.COMMAND_WORDS.get(steady, fc_profile.RAMP_STOP_WORD)
 
 
 class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
     """
     What every FC-profile drive shares, whatever carries its telegrams (Modbus, FC protocol).
 
-    Model and identity, the readouts and their rotation, the decode of status word, main
-    actual value and readouts into a reading, trips from the alarm word, the reference
-    scaling and the commands' control words. Subclasses say how the data travels.
+    Model and identity, and the commands' control words and the reference scaling; its
+    readouts are a :class:`~drive_bridge.devices.fc_profile_reading.DriveReadouts`
+    (``readout_set``), the decode of a poll a
+    :class:`~drive_bridge.devices.fc_profile_reading.FcProfileDecoder` (``decoder``).
+    Subclasses say how the data travels.
     """
 
     commands = frozenset({Command.START, Command.STOP, Command.QUICK_STOP, Command.COAST_STOP,
@@ -154,15 +149,15 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         self.current_scale = current_scale
         self.comms_timeout_s = comms_timeout_s
         self.comms_timeout_function = comms_timeout_function
-        self.readout_overrides = dict(readout_overrides or {})
-        self.reached_reference = False
         self.identity: Dict[str, str] = {}
         self._identified = data.identify_parameter is None
-        self.read = Freshness()  # the readouts, each with the poll that read it
-        self._witnessed: Dict[str, int] = {}  # readout -> the poll since which it is current
-        self._readouts: Dict[str, Dict[str, ParameterSpec]] = {}
-        self._rotation = 0
-        self.slow_readouts = slow_readouts or SlowReadouts(0.0)
+        self.readout_set = DriveReadouts(
+            data.readouts, lambda number, on_model: data.spec(number, model=on_model),
+            readout_overrides, slow_readouts)
+        self.decoder = FcProfileDecoder(data.alarm_bits, data.warning_bits,
+                                        data.extended_status_bits, current_scale)
+        self.read = self.readout_set.read  # the readouts, each with the poll that read it
+        self.slow_readouts = self.readout_set.slow_readouts
 
     # -- model and readouts -------------------------------------------------------------
     @property
@@ -173,33 +168,43 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
 
     @property
     def readouts(self) -> Dict[str, ParameterSpec]:
-        """Return readout name -> parameter spec for the resolved model (built once a model)."""
-        model = self.default_model
-        if model not in self._readouts:
-            numbers = dict(self.data.readouts[model], **self.readout_overrides)
-            self._readouts[model] = {name: self.data.spec(number, model=model)
-                                     for name, number in numbers.items()}
-        return self._readouts[model]
+        """Return readout name -> parameter spec for the resolved model."""
+        return self.readout_set.of_model(self.default_model)
 
     @property
     def reading_fields(self) -> FrozenSet[str]:
         """Return speed feedback and the readouts this model has (current, thermal, words)."""
-        names = set(self.readouts)
-        fields = {'speed_feedback'}
-        for field_name, readout in (('motor_current', 'motor_current'),
-                                    ('motor_temperature', 'motor_thermal'),
-                                    ('alarm_word', 'alarm_word'),
-                                    ('warning_word', 'warning_word')):
-            if readout in names:
-                fields.add(field_name)
-        return frozenset(fields)
+        return self.readout_set.fields(self.default_model)
 
     def on_offline(self) -> None:
         """Forget every value read: the drive may come back as another one."""
-        self.reached_reference = False
-        self.read.forget()
+        self.decoder.forget()
+        self.readout_set.forget()
         self._identified = self.data.identify_parameter is None
 
+    def next_rotating_readout(self, now_s: float) -> Optional[str]:
+        """Return the slow readout whose turn it is, one a readout period, if one is due."""
+        return self.readout_set.next_rotating(self.default_model, now_s)
+
+    def take_status(self, status: StatusWord, read: List[str]) -> List[str]:
+        """
+        Note the status word just read; return the readouts to fetch at once (not in ``read``).
+
+        Those a status bit witnesses (:func:`~drive_bridge.devices.fc_profile_reading.witnesses`)
+        when the bit is set (trip, warning) or when the value read is older than the bit's
+        present value.
+        """
+        return self.readout_set.take_status(self.default_model, status, read)
+
+    def take_readout(self, name: str, value: object) -> None:
+        """Keep the decoded value of readout ``name`` (display units), read in this poll."""
+        self.readout_set.take(name, value)
+
+    def current(self, name: str) -> object:
+        """Return readout ``name`` as last read, or None where its status bit changed since."""
+        return self.readout_set.current(name)
+
+    # -- identity -----------------------------------------------------------------------
     def identity_parameters(self) -> Tuple[Tuple[str, int], ...]:
         """Return the (key, parameter) pairs still to read to identify the drive."""
         if self._identified:
@@ -207,42 +212,6 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         pairs = (('drive_type', self.data.identify_parameter),
                  ('software_version', self.data.version_parameter))
         return tuple((key, number) for key, number in pairs if number is not None)
-
-    def next_rotating_readout(self, now_s: float) -> Optional[str]:
-        """
-        Return the slow readout whose turn it is, if the poll begun at ``now_s`` reads one.
-
-        They take turns, one a readout period.
-        """
-        rotating = [name for name in self.readouts if name not in ALWAYS_READ]
-        if not rotating or not self.slow_readouts.due(now_s):
-            return None
-        name = rotating[self._rotation % len(rotating)]
-        self._rotation += 1
-        return name
-
-    def take_status(self, status: StatusWord, read: List[str]) -> List[str]:
-        """
-        Note the status word just read; return the readouts to fetch at once (not in ``read``).
-
-        Those a status bit witnesses (:func:`witnesses`) when the bit is set (trip, warning)
-        or when the value read is older than the bit's present value.
-        """
-        wanted = []
-        for name, on in witnesses(status).items():
-            self._witnessed[name] = self.read.hold(name, on)
-            stale = self.read.read_in(name) is not None and self.current(name) is None
-            if on or stale:
-                wanted.append(name)
-        return [name for name in wanted if name in self.readouts and name not in read]
-
-    def take_readout(self, name: str, value: object) -> None:
-        """Keep the decoded value of readout ``name`` (display units), read in this poll."""
-        self.read.take(name, value)
-
-    def current(self, name: str) -> object:
-        """Return readout ``name`` as last read, or None where its status bit changed since."""
-        return self.read.current(name, self._witnessed.get(name, 0))
 
     def take_identity(self, results: Dict[str, object]) -> None:
         """Take the identity replies (text, or the error that refused the read)."""
@@ -268,73 +237,17 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
     # -- decode -------------------------------------------------------------------------
     def reading(self, status_word: int, actual_word: int, control: ControlView) -> DeviceReading:
         """Return the reading of one poll from its status word, actual value and readouts."""
-        steady = control.steady
-        commanded_run = None if steady is None else steady is Command.START
-        status = StatusWord(status_word)
-        if not commanded_run:
-            self.reached_reference = False
-        elif status.flag(fc_control.STW_RUNNING) and status.flag(fc_control.STW_ON_REFERENCE):
-            # Running on reference: a drive that has not started yet reads "on reference"
-            # too (stopped at its output), which must not end 'starting' before it began.
-            self.reached_reference = True
-        reading = DeviceReading(
-            state=status.state(commanded_run, self.reached_reference),
-            status_word=status_word, speed_feedback_pct=fc_scaling.word_to_percent(actual_word))
-        self._fill_readouts(reading)
-        self._fill_trip(reading, status)
-        self._fill_details(reading, status, actual_word, control)
-        return reading
-
-    def _fill_readouts(self, reading: DeviceReading) -> None:
-        values = {name: self.current(name) for name in self.readouts}
-        if values.get('motor_current') is not None:
-            reading.motor_current_a = float(values['motor_current']) * self.current_scale
-        if values.get('motor_thermal') is not None:
-            reading.motor_temperature_pct = float(values['motor_thermal'])
-        if values.get('alarm_word') is not None:
-            reading.alarm_word = int(values['alarm_word'])
-        if values.get('warning_word') is not None:
-            reading.warning_word = int(values['warning_word'])
-
-    def _fill_trip(self, reading: DeviceReading, status: StatusWord) -> None:
-        if not status.tripped:
-            return
-        code, name = self.trip_from_alarm_word(reading.alarm_word)
-        reading.trip_code, reading.trip_name = code, name
-        locked = ' (trip locked: cycle the mains power)' if \
-            status.flag(fc_control.STW_TRIP_LOCKED) else ''
-        reading.fault = f'tripped: {name}{locked}'
+        reference_pct = fc_profile_scaling.word_to_percent(control.reference_word)
+        return self.decoder.reading(
+            status_word, actual_word, control.steady,
+            self.readout_set.values(self.default_model), {'model': self.model, **self.identity},
+            {'control_word_sent': self.describe_control(control),
+             'reference_word': f'0x{control.reference_word:04X}',
+             'reference_pct': f'{reference_pct:g}'})
 
     def trip_from_alarm_word(self, alarm_word: Optional[int]) -> Tuple[int, str]:
         """Return (trip code, names of the set bits); unknown code while no bit is read."""
-        if not alarm_word:
-            return TRIP_CODE_UNKNOWN, 'tripped (alarm word not read yet or empty)'
-        codes = [self.data.alarm_bits.get(index, (1000 + index, f'alarm word bit {index}'))
-                 for index in range(32) if alarm_word >> index & 1]
-        return codes[0][0], ', '.join(name for _, name in codes)
-
-    def _fill_details(self, reading: DeviceReading, status: StatusWord, actual_word: int,
-                      control: ControlView) -> None:
-        details = {'model': self.model}
-        details.update(self.identity)
-        details.update({name: str(value) for name, value in status.flags().items()})
-        details['main_actual_value'] = f'0x{actual_word:04X}'
-        details['control_word_sent'] = self.describe_control(control)
-        details['reference_word'] = f'0x{control.reference_word:04X}'
-        details['reference_pct'] = f'{fc_scaling.word_to_percent(control.reference_word):g}'
-        for name in self.readouts:
-            value = self.current(name)
-            if value is not None:
-                details[name] = f'{value:g}' if isinstance(value, float) else str(value)
-        reading.warnings.extend(status.warnings())
-        if reading.warning_word:
-            details['warnings'] = _bit_names(reading.warning_word, self.data.warning_bits)
-        extended = self.current('extended_status')
-        if isinstance(extended, int):
-            details['extended_status'] = _bit_names(extended, self.data.extended_status_bits)
-        if not status.bus_control:
-            reading.warnings.append('local operation: the drive ignores bus commands')
-        reading.details = details
+        return self.decoder.trip_from_alarm_word(alarm_word)
 
     def describe_control(self, control: ControlView) -> str:
         """Return the control word the keepalive writes, in words."""
@@ -357,9 +270,9 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         reset never restarts a motor.
         """
         if command is Command.RESET:
-            word = fc_control.RAMP_STOP_WORD
-            return fc_control.with_reset(word), word
-        word = fc_control.COMMAND_WORDS.get(command)
+            word = fc_profile.RAMP_STOP_WORD
+            return fc_profile.with_reset(word), word
+        word = fc_profile.COMMAND_WORDS.get(command)
         if word is None:
             raise CommandRefused(f'drives have no {command.value} command (allowed: start, '
                                  'stop, quick_stop, coast_stop, reset)')
@@ -368,7 +281,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
     def reference_word(self, percent: float) -> int:
         """Return the reference word of ``percent`` (FC scaling); raise CommandRefused."""
         try:
-            return fc_scaling.percent_to_word(percent)
+            return fc_profile_scaling.percent_to_word(percent)
         except (ValueError, TypeError) as error:
             raise CommandRefused(f'{error}: nothing sent') from None
 
@@ -377,7 +290,7 @@ class FcProfileDrive(DeviceProfile, CyclicControl, SpeedReference, SetupWrites):
         return self.data.explain_exception(code, detail)
 
 
-class DriveProfile(FcProfileDrive, ParameterAccess):
+class FcProfileModbusDrive(FcProfileDrive, ParameterAccess):
     """
     An FC-profile drive over Modbus RTU: FC 51 built-in, VLT 5000/6000 option card.
 
@@ -553,11 +466,6 @@ class DriveProfile(FcProfileDrive, ParameterAccess):
         return None
 
 
-def _bit_names(word: int, names: Dict[int, str]) -> str:
-    set_bits = [names.get(index, f'bit {index}') for index in range(32) if word >> index & 1]
-    return ', '.join(set_bits) or 'none'
-
-
 # Device settings every FC-profile drive family takes (beyond the common ones).
 COMMS_TIMEOUT = Setting(
     'comms_timeout', float, 0.0,
@@ -572,7 +480,7 @@ CURRENT_PARAMETER = Setting(
 
 def make_drive_profile(data: DriveFamilyData) -> Callable[[str, str, Mapping[str, Any]],
                                                           DeviceProfile]:
-    """Return the profile factory of a drive family (Modbus RTU: :class:`DriveProfile`)."""
+    """Return the profile factory of a drive family (Modbus RTU: :class:`FcProfileModbusDrive`)."""
     def make(model: str, protocol: str, options: Mapping[str, Any]) -> DeviceProfile:
         overrides = {'motor_current': options['current_parameter']} \
             if options.get('current_parameter') else {}
@@ -585,5 +493,5 @@ def make_drive_profile(data: DriveFamilyData) -> Callable[[str, str, Mapping[str
                 raise ConfigError("drive_link_timeout is the Modbus option card's register 3: "
                                   'on the FC protocol there is no card; leave it at 0')
             return FcProtocolDriveProfile(*common)
-        return DriveProfile(*common, options.get('drive_link_timeout', 0.0))
+        return FcProfileModbusDrive(*common, options.get('drive_link_timeout', 0.0))
     return make

@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 import math
 from typing import Deque, Dict, Optional
 
-from drive_bridge.devices import fc, fc51_parameters as fc51, vlt
+from drive_bridge.devices import fc51, fc51_parameters, vlt
 from drive_bridge.devices.parameters import ParameterSpec
-from drive_bridge.protocol import fc_control as ctl, fc_scaling
-from drive_bridge.sim.fc_parameter_store import FcParameterStore
+from drive_bridge.protocol import fc_profile as ctl, fc_profile_scaling
+from drive_bridge.sim.fc_profile_parameter_store import FcProfileParameterStore
 
 # Alarm word bits (manual 004 section 7.1.1).
 ALARM_CONTROL_WORD_TIMEOUT = 4
@@ -38,7 +38,7 @@ VLT_CURRENT_PARAMETER = {'vlt5000': 520, 'vlt6000': 514}
 
 
 @dataclass
-class FcSimConfig:
+class FcProfileSimConfig:
     """Settings of one simulated drive; times in seconds, currents in amperes."""
 
     model: str = 'fc51'  # fc51, vlt5000 or vlt6000
@@ -63,16 +63,16 @@ class FcSimConfig:
     stopbits: int = 1
 
 
-class FcModel:
+class FcProfileModel:
     """
     One FC-profile drive: control word, ramps, comms timeout, current, heat and alarms.
 
-    Its parameters are a :class:`FcParameterStore` (``parameters`` is the store's dict of
+    Its parameters are a :class:`FcProfileParameterStore` (``parameters`` is the store's dict of
     raw values by number, ``table`` its parameter table); the live readouts come from here.
     """
 
-    def __init__(self, config: Optional[FcSimConfig] = None, now_s: float = 0.0):
-        self.config = config or FcSimConfig()
+    def __init__(self, config: Optional[FcProfileSimConfig] = None, now_s: float = 0.0):
+        self.config = config or FcProfileSimConfig()
         self.family = 'vlt' if self.config.model.startswith('vlt') else 'fc'
         self.store = parameter_store(self.config, self.family)
         self.table = self.store.table
@@ -111,7 +111,7 @@ class FcModel:
             return 100.0
         if not self.run_requested() or self._stop_by_timeout():
             return 0.0
-        return fc_scaling.word_to_percent(self.reference_word)
+        return fc_profile_scaling.word_to_percent(self.reference_word)
 
     def _stop_by_timeout(self) -> bool:
         return self.timeout_active and self.timeout_function() in (TIMEOUT_STOP, TIMEOUT_TRIP)
@@ -245,7 +245,7 @@ class FcModel:
 
     def actual_word(self) -> int:
         """Return the main actual value (output frequency) in FC scaling."""
-        return fc_scaling.percent_to_word(max(-200.0, min(199.99, self.output_pct)))
+        return fc_profile_scaling.percent_to_word(max(-200.0, min(199.99, self.output_pct)))
 
     # -- parameters ---------------------------------------------------------------------
     @property
@@ -267,7 +267,7 @@ class FcModel:
         frequency_x10 = round(abs(self.output_pct) * self.config.motor_frequency_hz / 10.0)
         values = {
             1540: self.config.type_text, 1543: self.config.software_version,
-            1600: self.control_word, 1602: round(fc_scaling.word_to_percent(
+            1600: self.control_word, 1602: round(fc_profile_scaling.word_to_percent(
                 self.reference_word) * 10), 1603: self.status_word(),
             1613: frequency_x10, 1614: current_x100,
             1618: min(255, round(self.temperature_pct)),
@@ -288,9 +288,9 @@ class FcModel:
                          running=self.output_pct != 0.0)
 
 
-def parameter_store(config: FcSimConfig, family: str) -> FcParameterStore:
+def parameter_store(config: FcProfileSimConfig, family: str) -> FcProfileParameterStore:
     """Return the parameters a drive of ``family`` starts with, its configuration's among them."""
-    data = vlt.DATA if family == 'vlt' else fc.DATA
+    data = vlt.DATA if family == 'vlt' else fc51.DATA
     table: Dict[int, ParameterSpec] = dict(data.table(config.model))
     # The ramps live under the FC numbers 3-41, 3-42 and 3-81 in both variants.
     configured: Dict[int, object] = {
@@ -304,12 +304,13 @@ def parameter_store(config: FcSimConfig, family: str) -> FcParameterStore:
                            803: round(config.ctw_timeout_s * 10),
                            804: config.ctw_timeout_function, 3: 0})
         configured.update(serial_line_parameters(config))
-    return FcParameterStore(table, data.conversion_factors, configured, config.extra_parameters,
-                            maxima={} if family == 'vlt' else {804: TIMEOUT_TRIP},
-                            option_card=family == 'vlt')
+    return FcProfileParameterStore(table, data.conversion_factors, configured,
+                                   config.extra_parameters,
+                                   maxima={} if family == 'vlt' else {804: TIMEOUT_TRIP},
+                                   option_card=family == 'vlt')
 
 
-def serial_line_parameters(config: FcSimConfig) -> Dict[int, object]:
+def serial_line_parameters(config: FcProfileSimConfig) -> Dict[int, object]:
     """Return par. 8-30..8-33 as the line the drive is served on (its address among them)."""
     def option(by_option: Dict[int, object], value: object, what: str) -> int:
         for number, meaning in by_option.items():
@@ -317,8 +318,8 @@ def serial_line_parameters(config: FcSimConfig) -> Dict[int, object]:
                 return number
         raise ValueError(f'the FC 51 has no par. 8-3x option for {what} {value!r}: allowed '
                          f'{", ".join(str(meaning) for meaning in by_option.values())}')
-    return {830: option(fc51.PROTOCOL_BY_OPTION, config.protocol, 'protocol'),
+    return {830: option(fc51_parameters.PROTOCOL_BY_OPTION, config.protocol, 'protocol'),
             831: config.address,
-            832: option(fc51.BAUD_BY_OPTION, config.baudrate, 'baud rate'),
-            833: option(fc51.FRAMING_BY_OPTION, (config.parity, config.stopbits),
+            832: option(fc51_parameters.BAUD_BY_OPTION, config.baudrate, 'baud rate'),
+            833: option(fc51_parameters.FRAMING_BY_OPTION, (config.parity, config.stopbits),
                         'parity and stop bits')}

@@ -1,5 +1,5 @@
 """
-Simulated Modbus faces of FC-profile drives, onto :class:`FcModel`.
+Simulated Modbus faces of FC-profile drives, onto :class:`FcProfileModel`.
 
 FC 51 built-in interface (manual 004 section 5.2.8): coils 1-16 control word, 17-32
 reference, 33-48 status word, 49-64 main actual value, 65 EEPROM store; holding registers
@@ -19,8 +19,8 @@ from typing import Any, Callable, Dict, List, Optional
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.protocol.words import coils_to_words, words_to_coils
-from drive_bridge.sim.fc_model import FcModel, FcSimConfig
-from drive_bridge.sim.fc_parameter_store import ParameterError
+from drive_bridge.sim.fc_profile_model import FcProfileModel, FcProfileSimConfig
+from drive_bridge.sim.fc_profile_parameter_store import ParameterError
 
 ILLEGAL_FUNCTION, ILLEGAL_ADDRESS, ILLEGAL_VALUE, DEVICE_FAILURE = 1, 2, 3, 4
 # The option card's own codes for the same faults ("VLT 6000 Errors").
@@ -38,10 +38,10 @@ class SlaveError(Exception):
         self.code = code
 
 
-class FcSimDevice:
+class FcProfileModbusDevice:
     """Answers Modbus requests like an FC 51's built-in RS-485 interface."""
 
-    def __init__(self, model: FcModel):
+    def __init__(self, model: FcProfileModel):
         self.model = model
         self.option_card = model.family == 'vlt'
         self._handlers: Dict[int, Callable[[bytes, float], bytes]] = {
@@ -178,6 +178,7 @@ class FcSimDevice:
         return (address + 1) // 10
 
 
-def make_drive_device(model: str, now_s: float, **settings: Any) -> FcSimDevice:
-    """Return a simulated drive of ``model`` (settings go to its :class:`FcSimConfig`)."""
-    return FcSimDevice(FcModel(FcSimConfig(model=model, **settings), now_s))
+def make_drive_device(model: str, now_s: float, **settings: Any) -> FcProfileModbusDevice:
+    """Return a simulated drive of ``model`` (settings go to its :class:`FcProfileSimConfig`)."""
+    return FcProfileModbusDevice(FcProfileModel(FcProfileSimConfig(model=model, **settings),
+                                                now_s))

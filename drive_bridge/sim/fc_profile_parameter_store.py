@@ -1,17 +1,17 @@
 """
 The parameters of a simulated FC-profile drive: stored values and their register access.
 
-The drive model (:class:`~drive_bridge.sim.fc_model.FcModel`) owns the behaviour and the live
-readouts; this store owns every settable parameter's raw value, how many registers each
-takes, the text parameters and the option card's index register (IND), and answers a read
-or a write with the detail code of register 7 when it fails (manual 004 section 5.3.2).
-The model hands it what only the model knows: a readout's live value, whether the output
-runs.
+The drive model (:class:`~drive_bridge.sim.fc_profile_model.FcProfileModel`) owns the behaviour
+and the live readouts; this store owns every settable parameter's raw value, how many
+registers each takes, the text parameters and the option card's index register (IND), and
+answers a read or a write with the detail code of register 7 when it fails (manual 004
+section 5.3.2). The model hands it what only the model knows: a readout's live value,
+whether the output runs.
 """
 
 from typing import Dict, Mapping, Optional
 
-from drive_bridge.devices import fc, vlt
+from drive_bridge.devices import fc51, vlt
 from drive_bridge.devices.parameters import DATA_TYPES, ParameterSpec, TEXT
 from drive_bridge.protocol.words import join_u32, registers_to_text, text_to_registers
 
@@ -27,11 +27,11 @@ class ParameterError(Exception):
     """A parameter access fails: exception 04 with ``detail`` in register 7."""
 
     def __init__(self, detail: int):
-        super().__init__(fc.LAST_ERROR_DETAILS.get(detail, str(detail)))
+        super().__init__(fc51.LAST_ERROR_DETAILS.get(detail, str(detail)))
         self.detail = detail
 
 
-class FcParameterStore:
+class FcProfileParameterStore:
     """
     Every stored parameter of one simulated drive, by number, in raw units.
 
