@@ -13,7 +13,11 @@ import subprocess
 import time
 from typing import Dict, List
 
-from drive_bridge.sim.devices import make_sim_server
+from drive_bridge.config.model import build_device
+from drive_bridge.devices import parameter_info
+from drive_bridge.devices.remote_parameters import remote_parameters
+from drive_bridge.protocol.requests import ReadRegisters
+from drive_bridge.sim.devices import make_device, make_sim_server
 import pytest
 from rcl_interfaces.msg import Parameter, ParameterEvent, ParameterType, ParameterValue
 from rcl_interfaces.srv import (
@@ -34,6 +38,9 @@ DEVICES = {
               'allow_control': False},
 }
 WRITE_FUNCTIONS = (5, 6, 15, 16)
+READ_REGISTERS = 3
+WRITE_COILS = 15
+NOT_SET = ParameterType.PARAMETER_NOT_SET
 # The env.sh of a ros2 CLI built by ../shared/tools/ros2_tools.sh; opt-in: each ros2 call
 # costs seconds of CPU (about 90 s for the test on a busy 2-core machine).
 ROS2_ENV = os.environ.get('DRIVE_BRIDGE_ROS2_ENV', '')
@@ -113,8 +120,11 @@ class ParameterClient:
                               DescribeParameters.Request(names=names)).descriptors)
 
     def set_value(self, device: str, name: str, value):
-        request = SetParameters.Request(parameters=[Parameter(name=name, value=message(value))])
-        return self.call(device, 'set', request).results[0]
+        return self.set_message(device, name, message(value))
+
+    def set_message(self, device: str, name: str, value: ParameterValue, timeout_s=10.0):
+        request = SetParameters.Request(parameters=[Parameter(name=name, value=value)])
+        return self.call(device, 'set', request, timeout_s).results[0]
 
     def dump(self, device: str) -> Dict[str, ParameterValue]:
         """Return every parameter's value as `ros2 param dump` gets them (once all are read)."""
@@ -156,16 +166,43 @@ def writes_to(sim, unit: int, since: int) -> List[bytes]:
     return [frame for frame in frames if frame[0] == unit and frame[1] in WRITE_FUNCTIONS]
 
 
+def parameter_writes(sim, unit: int, since: int) -> List[bytes]:
+    """Return the writes to ``unit`` after ``since`` but its polls' control word (coils 1-32)."""
+    return [frame for frame in writes_to(sim, unit, since)
+            if not (frame[1] == WRITE_COILS and frame[2:4] == b'\x00\x00')]
+
+
 def frame_count(sim) -> int:
     with sim.lock:
         return len(sim.stats.frames)
+
+
+def setting_addresses(device: str) -> set:
+    """Return the register addresses a read of one of the device's settings asks for."""
+    profile = build_device(device, DEVICES[device], 'modbus_rtu').make_spec().profile
+    settings = [parameter for parameter in remote_parameters(
+        parameter_info.parameter_table(profile), parameter_info.conversion_factors(profile))
+        if not parameter.read_only]  # the polls read readouts too, never a setting
+    return {request.address for parameter in settings
+            for request in profile.parameter_plan(parameter.number).transactions
+            if isinstance(request, ReadRegisters)}
+
+
+def setting_reads(sim, device: str, since: int) -> List[bytes]:
+    """Return the reads of one of ``device``'s settings the simulator saw after ``since``."""
+    unit, addresses = DEVICES[device]['address'], setting_addresses(device)
+    with sim.lock:
+        frames = list(sim.stats.frames[since:])
+    return [frame for frame in frames if frame[0] == unit and frame[1] == READ_REGISTERS
+            and int.from_bytes(frame[2:4], 'big') in addresses]
 
 
 # -- list, describe, get ------------------------------------------------------------------
 def test_list_has_each_family_tabled_parameters_and_the_nodes_own(params):
     conv = params.names('conv')
     assert 'p3_41_ramp_1_ramp_up_time' in conv and 'p16_14_motor_current' in conv
-    assert {'use_sim_time', 'refresh_period', 'save_to_eeprom'} <= set(conv)
+    assert {'use_sim_time', 'refresh_period', 'refresh_while_watched',
+            'save_to_eeprom'} <= set(conv)
     assert 'p3_10_preset_reference' not in conv  # an array: not offered
     fan = params.names('fan')
     assert {'p104_motor_frequency', 'p533_display_text_1', 'p514_motor_current'} <= set(fan)
@@ -376,6 +413,96 @@ def test_sets_while_the_line_is_polled_keep_the_others_poll_rate(params, sim):
     values = iter([2.0, 3.0] * 100)
     busy = polls_of(20, 3.0, set_and_pause)
     assert busy >= 0.8 * quiet, (quiet, busy)
+
+
+def test_nothing_is_read_while_nobody_looks(node, params, sim):
+    # Nobody calls the parameter services: the line carries the polls, no parameter read.
+    for device in DEVICES:
+        assert params.set_value(device, 'refresh_while_watched', 0.2).successful
+    try:
+        params.client.spin_until(lambda: False, 1.5)  # the windows close, reads in flight end
+        since = frame_count(sim)
+        params.client.spin_until(lambda: False, 3.0)
+        for device in DEVICES:
+            unit = DEVICES[device]['address']
+            with sim.lock:
+                polls = [frame for frame in sim.stats.frames[since:] if frame[0] == unit]
+            assert polls, f'{device} not polled'
+            assert setting_reads(sim, device, since) == [], device
+            assert parameter_writes(sim, unit, since) == [], device
+        start = time.monotonic()  # a get then reads on demand, within rqt's 1 s
+        got = params.get('conv', ['p3_41_ramp_1_ramp_up_time'])[0]
+        assert time.monotonic() - start < 1.0
+        assert got.double_value == pytest.approx(sim.devices[1].model.parameters[341] / 100)
+    finally:
+        for device in DEVICES:
+            assert params.set_value(device, 'refresh_while_watched', 30.0).successful
+
+
+def test_the_refresh_runs_while_someone_looks(params, sim):
+    since = frame_count(sim)
+    params.names('main')  # a call opens the window
+    assert params.client.spin_until(lambda: len(setting_reads(sim, 'main', since)) >= 2, 10.0)
+
+
+def test_bad_values_refused_in_a_short_line(params, sim):
+    since = frame_count(sim)
+    huge = ParameterValue(type=ParameterType.PARAMETER_INTEGER_ARRAY,
+                          integer_array_value=list(range(100000)))
+    for name in ('p1_23_motor_frequency', 'no_such'):
+        result = params.set_message('conv', name, huge, 20.0)
+        assert not result.successful and result.reason.endswith('nothing written')
+        assert len(result.reason) < 300 and '\n' not in result.reason, result.reason[:400]
+    long_name = 'x' * 100000
+    result = params.set_value('conv', long_name, 1)
+    assert not result.successful and len(result.reason) < 300, result.reason[:400]
+    shown = sim.devices[2].model.parameters[533]
+    text = params.set_value('fan', 'p533_display_text_1', 'y' * 100000)
+    assert not text.successful and len(text.reason) < 300, text.reason[:400]
+    assert sim.devices[2].model.parameters[533] == shown
+    for name in ('p1_23_motor_frequency', 'refresh_period'):
+        unknown = params.set_message('conv', name, ParameterValue(type=99))
+        assert not unknown.successful, name
+        assert 'unknown parameter type 99: nothing written' in unknown.reason, unknown.reason
+    assert params.get('conv', ['refresh_period'])[0].double_value == 0.5
+    atomic = params.call('conv', 'atomic', SetParametersAtomically.Request(parameters=[
+        Parameter(name='p3_42_ramp_1_ramp_down_time', value=message(9.0)),
+        Parameter(name='p1_23_motor_frequency', value=ParameterValue(type=99))])).result
+    assert not atomic.successful and 'unknown parameter type 99' in atomic.reason
+    assert parameter_writes(sim, 1, since) == []
+
+
+def test_values_read_before_an_outage_are_not_served_after_it(node, params, sim):
+    # No refresh at all: nothing else reads the device between the outage and the get.
+    assert params.set_value('fan', 'refresh_period', 0.0).successful
+    powered_off = False
+    try:
+        assert params.value('fan', 'p104_motor_frequency') == \
+            sim.devices[2].model.parameters[104]
+        sim.power_off(2)
+        powered_off = True
+        assert node.wait_state('fan', 'offline', 15.0)
+        (held,) = params.describe('fan', ['p104_motor_frequency'])
+        assert 'value read' not in held.additional_constraints, held.additional_constraints
+        assert params.get('fan', ['p104_motor_frequency'])[0].type == NOT_SET
+        since = frame_count(sim)
+        refused = params.set_value('fan', 'p104_motor_frequency', 60)  # not online: refused
+        assert not refused.successful and refused.reason.endswith('nothing written'), \
+            refused.reason
+        assert writes_to(sim, 2, since) == []
+        fresh = make_device('vlt6000', unit=2)  # a power cycle: another value now
+        fresh.model.parameters[104] = 60 if fresh.model.parameters[104] != 60 else 50
+        sim.power_on(2, fresh)
+        powered_off = False
+        assert node.spin_until(lambda: node.state('fan') not in ('offline', ''), 15.0)
+        got = params.get('fan', ['p104_motor_frequency'])[0]
+        assert got.type == NOT_SET or got.integer_value == fresh.model.parameters[104], \
+            f'served {got.integer_value}, read before the outage'
+        assert params.value('fan', 'p104_motor_frequency') == fresh.model.parameters[104]
+    finally:
+        if powered_off:
+            sim.power_on(2, make_device('vlt6000', unit=2))
+        assert params.set_value('fan', 'refresh_period', 0.5).successful
 
 
 # -- the real ros2 CLI --------------------------------------------------------------------

@@ -19,7 +19,7 @@ from contextlib import contextmanager
 import threading
 from typing import Dict, Iterator, List, Optional, TYPE_CHECKING
 
-from drive_bridge.bus.events import BusEvent
+from drive_bridge.bus.events import BusEvent, DeviceOffline
 from drive_bridge.bus.master import BusMaster
 from drive_bridge.config import model as cfg
 from drive_bridge.ros.node.device_interface import CommandPaths, DeviceInterface
@@ -143,12 +143,19 @@ class BusSession:
                 self._logger.error(f'{when}: {outcome}')
 
     def _on_bus_event(self, event: BusEvent) -> None:
-        """Publish a reading, or log a change, as the bus thread reports it."""
+        """
+        Publish a reading, or log a change, as the bus thread reports it.
+
+        A device gone offline has its parameter values forgotten at once (whatever the
+        parameter node's refresh does): nothing read before an outage is served after it.
+        """
         with self._lock:
             device = self._devices.get(event.device)
             if device is None:  # an event of a bus closed since
                 return
             try:
+                if isinstance(event, DeviceOffline) and self.parameters is not None:
+                    self.parameters.forget(event.device)  # before anyone sees 'offline'
                 device.show(event)
                 if self.joints is not None:
                     self.joints.bridge.on_bus_event(event)

@@ -5,7 +5,9 @@ The bus thread stores what a read returned (the background refresh, a get, a set
 back); the executor's services take values from here. A value is kept with the monotonic
 time it was read, so that its age can be said. When the device goes offline every value is
 forgotten: what it holds may have changed meanwhile (a keypad, a power cycle), and nothing
-stale is served as current.
+stale is served as current. Each forgetting starts a new *generation*: a read queued before
+it (its answer may come after it) is stored only if no forgetting came in between, so a
+value read before an outage is never kept after it.
 """
 
 import threading
@@ -21,18 +23,34 @@ class ValueCache:
         self._lock = threading.Lock()
         self._values: Dict[int, Tuple[Any, float]] = {}
         self._errors: Dict[int, str] = {}  # why the device refused the last read
+        self._generation = 0  # forgettings so far
 
-    def store(self, number: int, value: Any) -> Optional[Any]:
-        """Keep ``value`` as read now; return the value it replaces (None: none)."""
+    @property
+    def generation(self) -> int:
+        """Return how many times the values were forgotten (taken when a read is queued)."""
         with self._lock:
+            return self._generation
+
+    def store(self, number: int, value: Any, generation: Optional[int] = None) -> Optional[Any]:
+        """
+        Keep ``value`` as read now; return the value it replaces (None: none).
+
+        With ``generation`` (:attr:`generation` when the read was queued), a value read before
+        the last forgetting is not kept (None).
+        """
+        with self._lock:
+            if generation is not None and generation != self._generation:
+                return None
             before = self._values.get(number)
             self._values[number] = (value, self._clock())
             self._errors.pop(number, None)
         return None if before is None else before[0]
 
-    def refused(self, number: int, reason: str) -> None:
+    def refused(self, number: int, reason: str, generation: Optional[int] = None) -> None:
         """Keep why the device refused to read ``number`` (its value is no longer held)."""
         with self._lock:
+            if generation is not None and generation != self._generation:
+                return
             self._values.pop(number, None)
             self._errors[number] = reason
 
@@ -54,10 +72,11 @@ class ValueCache:
         return None if entry is None else self._clock() - entry[1]
 
     def forget(self) -> None:
-        """Forget every value (the device went offline)."""
+        """Forget every value (the device went offline, nobody looks any more)."""
         with self._lock:
             self._values.clear()
             self._errors.clear()
+            self._generation += 1
 
     def __len__(self) -> int:
         with self._lock:

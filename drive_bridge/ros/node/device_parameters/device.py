@@ -89,6 +89,10 @@ class DeviceParameters:
             self.cache.forget()
         return online
 
+    def forget(self) -> None:
+        """Forget every value held (the device went offline; nobody looks any more)."""
+        self.cache.forget()
+
     def writes_allowed(self) -> bool:
         """Return whether the device takes writes (``allow_control``, as the bus has it now)."""
         return self.bus.snapshot(self.name).allow_control
@@ -100,9 +104,10 @@ class DeviceParameters:
     def read(self, parameter: RemoteParameter) -> Future:
         """Queue a read; its value is stored (and a change announced) when it comes."""
         number = parameter.number
+        generation = self.cache.generation  # a forgetting before the answer: not kept
         future = self.bus.run_parameter_service(
             self.name, lambda service: service.read(number), label=f'read {parameter.name}')
-        future.add_done_callback(lambda done: self._store(parameter, done))
+        future.add_done_callback(lambda done: self._store(parameter, done, generation))
         return future
 
     def write(self, parameter: RemoteParameter, value: Any, eeprom: bool) -> Future:
@@ -116,37 +121,38 @@ class DeviceParameters:
         """
         number = parameter.number
         options = ParameterOptions(eeprom=eeprom and self.eeprom)
+        generation = self.cache.generation
         future = self.bus.run_parameter_service(
             self.name, lambda service: service.write(number, value, options),
             label=f'write {parameter.name}')
-        future.add_done_callback(lambda done: self._store_written(parameter, done))
+        future.add_done_callback(lambda done: self._store_written(parameter, done, generation))
         return future
 
-    def _store_written(self, parameter: RemoteParameter, done: Future) -> None:
+    def _store_written(self, parameter: RemoteParameter, done: Future, generation: int) -> None:
         """Keep the value a write read back, also one that differs (bus thread)."""
         if done.cancelled():
             return
         error = done.exception()
         if error is None:
-            self._keep(parameter, done.result())
+            self._keep(parameter, done.result(), generation)
         elif isinstance(error, ReadBackMismatch) and error.read is not None:
-            self._keep(parameter, error.read)
+            self._keep(parameter, error.read, generation)
 
-    def _store(self, parameter: RemoteParameter, done: Future) -> None:
+    def _store(self, parameter: RemoteParameter, done: Future, generation: int) -> None:
         """Keep a value read (bus thread); announce it if it changed."""
         if done.cancelled():
             return
         error = done.exception()
         if error is not None:
             if str(error).startswith('rejected by'):  # the device's own refusal
-                self.cache.refused(parameter.number, str(error))
+                self.cache.refused(parameter.number, str(error), generation)
             return
-        self._keep(parameter, done.result())
+        self._keep(parameter, done.result(), generation)
 
-    def _keep(self, parameter: RemoteParameter, read: Any) -> None:
-        """Store a value read (bus thread); announce it if it changed."""
+    def _keep(self, parameter: RemoteParameter, read: Any, generation: int) -> None:
+        """Store a value read (bus thread), unless forgotten since; announce a change."""
         value = self.shown(parameter, read)
-        before = self.cache.store(parameter.number, value)
+        before = self.cache.store(parameter.number, value, generation)
         if before is not None and not info.same_value(before, value):
             self._on_change(parameter, value)
 

@@ -8,7 +8,10 @@ the bridge only) and has no ``/rosout`` (it logs through the bridge's logger); i
 bridge's ``use_sim_time``. Its own parameters:
 
 - ``refresh_period`` (double, s, default 0.5; 0: off): one parameter read again every
-  period in the background (:mod:`.refresher`);
+  period in the background, while someone looks (:mod:`.refresher`);
+- ``refresh_while_watched`` (double, s, default 30; 0: never in the background): how long
+  after the last call of a parameter service the background refresh runs (then it stops
+  and the values held are forgotten);
 - ``save_to_eeprom`` (bool, default false; drives only): a set is stored in RAM, or with
   true in RAM and EEPROM (it then survives a power cycle);
 - ``use_sim_time`` and the read-only ``start_type_description_service``, as every node has.
@@ -24,7 +27,8 @@ from drive_bridge.config import model as cfg
 from drive_bridge.devices.remote_parameters import RemoteParameter
 from drive_bridge.ros.node.device_parameters import messages
 from drive_bridge.ros.node.device_parameters.device import DeviceParameters
-from drive_bridge.ros.node.device_parameters.refresher import DEFAULT_REFRESH_PERIOD_S, Refresher
+from drive_bridge.ros.node.device_parameters.refresher import (
+    DEFAULT_REFRESH_PERIOD_S, DEFAULT_WATCH_WINDOW_S, Refresher)
 from drive_bridge.ros.node.device_parameters.services import ParameterServices
 from drive_bridge.ros.node.device_parameters.writer import DeviceWriter
 from drive_bridge.ros.node.gate import CommandGate
@@ -39,6 +43,7 @@ from rclpy.qos import qos_profile_parameter_events
 NODE_SUFFIX = '_parameters'
 TICK_S = 0.1  # the refresh and the give-up of waiting calls are looked at this often
 MAX_REFRESH_PERIOD_S = 3600.0
+MAX_WATCH_WINDOW_S = 86400.0
 
 
 def parameter_node(bridge: Node, device: str) -> Node:
@@ -66,9 +71,10 @@ class DeviceParameterNode:
         self.calls = ServiceCalls(self.node)
         writer = DeviceWriter(self.device, self.calls, gate, give_up_s, self._save_to_eeprom,
                               self.announce)
-        ParameterServices(self.node, self.device, writer, self.calls)
         self._refresher = Refresher(
-            self.device, lambda: float(self.node.get_parameter('refresh_period').value))
+            self.device, lambda: float(self.node.get_parameter('refresh_period').value),
+            lambda: float(self.node.get_parameter('refresh_while_watched').value))
+        ParameterServices(self.node, self.device, writer, self.calls, self._refresher.watched)
         self._timer = self.node.create_timer(
             TICK_S, self._tick, callback_group=self.calls.callback_group,
             clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -84,6 +90,12 @@ class DeviceParameterNode:
                 description='s between two background reads of one parameter (0: off)',
                 floating_point_range=[FloatingPointRange(
                     from_value=0.0, to_value=MAX_REFRESH_PERIOD_S, step=0.0)]))
+        self.node.declare_parameter(
+            'refresh_while_watched', DEFAULT_WATCH_WINDOW_S, ParameterDescriptor(
+                description='s the background refresh runs after the last call of a parameter '
+                'service (then it stops and the values held are forgotten; 0: never)',
+                floating_point_range=[FloatingPointRange(
+                    from_value=0.0, to_value=MAX_WATCH_WINDOW_S, step=0.0)]))
         if self.device.eeprom:
             self.node.declare_parameter('save_to_eeprom', False, ParameterDescriptor(
                 description='false: a set is stored in RAM (lost at power off); true: in '

@@ -33,22 +33,60 @@ def value_message(parameter: RemoteParameter, value: Optional[Any]) -> Parameter
     return ParameterValue(type=TYPES[DOUBLE_KIND], double_value=float(value))
 
 
+VALUE_FIELDS = {ParameterType.PARAMETER_BOOL: 'bool_value',
+                ParameterType.PARAMETER_INTEGER: 'integer_value',
+                ParameterType.PARAMETER_DOUBLE: 'double_value',
+                ParameterType.PARAMETER_STRING: 'string_value',
+                ParameterType.PARAMETER_BYTE_ARRAY: 'byte_array_value',
+                ParameterType.PARAMETER_BOOL_ARRAY: 'bool_array_value',
+                ParameterType.PARAMETER_INTEGER_ARRAY: 'integer_array_value',
+                ParameterType.PARAMETER_DOUBLE_ARRAY: 'double_array_value',
+                ParameterType.PARAMETER_STRING_ARRAY: 'string_array_value'}
+MAX_VALUE_CHARS = 60  # a value echoed in a reason is cut to this many characters
+MAX_REASON_CHARS = 400  # a reason longer than this loses its middle
+
+
+def type_refusal(message: ParameterValue) -> str:
+    """Return why the value's type code is refused ('' if it is one rcl knows)."""
+    if message.type == ParameterType.PARAMETER_NOT_SET or message.type in VALUE_FIELDS:
+        return ''
+    return f'unknown parameter type {message.type}'
+
+
 def python_value(message: ParameterValue) -> Any:
-    """Return the Python value a ParameterValue carries (None: not set)."""
-    kinds = {ParameterType.PARAMETER_BOOL: 'bool_value',
-             ParameterType.PARAMETER_INTEGER: 'integer_value',
-             ParameterType.PARAMETER_DOUBLE: 'double_value',
-             ParameterType.PARAMETER_STRING: 'string_value',
-             ParameterType.PARAMETER_BYTE_ARRAY: 'byte_array_value',
-             ParameterType.PARAMETER_BOOL_ARRAY: 'bool_array_value',
-             ParameterType.PARAMETER_INTEGER_ARRAY: 'integer_array_value',
-             ParameterType.PARAMETER_DOUBLE_ARRAY: 'double_array_value',
-             ParameterType.PARAMETER_STRING_ARRAY: 'string_array_value'}
-    field = kinds.get(message.type)
+    """Return the Python value a ParameterValue carries (None: not set; see type_refusal)."""
+    field = VALUE_FIELDS.get(message.type)
     if field is None:
         return None
     value = getattr(message, field)
     return list(value) if message.type >= ParameterType.PARAMETER_BYTE_ARRAY else value
+
+
+def short(value: Any) -> str:
+    """Return ``value`` as a reason shows it: its repr, cut to MAX_VALUE_CHARS with '...'."""
+    text = repr(value)
+    if len(text) <= MAX_VALUE_CHARS:
+        return text
+    size = f' ({len(value)} items)' if isinstance(value, (list, tuple)) else \
+        f' ({len(value)} characters)' if isinstance(value, str) else ''
+    return text[:MAX_VALUE_CHARS - 3] + '...' + size
+
+
+def short_reason(reason: str, value: Any) -> str:
+    """
+    Return ``reason`` in one short line: ``value`` echoed in it cut (:func:`short`).
+
+    What is still longer than MAX_REASON_CHARS loses its middle (its end, ``nothing
+    written``, stays).
+    """
+    for shown in {repr(value), str(value)}:
+        if len(shown) > MAX_VALUE_CHARS:
+            reason = reason.replace(shown, short(value))
+    reason = ' '.join(reason.splitlines())
+    if len(reason) > MAX_REASON_CHARS:
+        tail = MAX_REASON_CHARS // 4
+        reason = reason[:MAX_REASON_CHARS - tail - 5] + ' ... ' + reason[-tail:]
+    return reason
 
 
 def age_text(age_s: Optional[float], error: str = '') -> str:

@@ -47,6 +47,12 @@ class DeviceParameterNodes:
         """Return the full names of the parameter nodes."""
         return [device.full_name for device in self.nodes.values()]
 
+    def forget(self, device: str) -> None:
+        """Forget the values held of ``device`` (it went offline; any thread)."""
+        node = self.nodes.get(device)
+        if node is not None:
+            node.device.forget()
+
     def start(self) -> None:
         """Spin the parameter nodes on their own thread."""
         if self._thread is None and self.nodes:

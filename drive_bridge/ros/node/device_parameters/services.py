@@ -15,7 +15,7 @@ holds) and any still missing go out as ``PARAMETER_NOT_SET``.
 """
 
 import time
-from typing import List
+from typing import Callable, List
 
 from drive_bridge.errors import DriveBridgeError
 from drive_bridge.ros.node.device_parameters import messages
@@ -39,11 +39,12 @@ class ParameterServices:
     """The parameter services of one device's parameter node."""
 
     def __init__(self, node: Node, device: DeviceParameters, writer: DeviceWriter,
-                 calls: ServiceCalls):
+                 calls: ServiceCalls, watched: Callable[[], None] = lambda: None):
         self._node = node
         self._device = device
         self._writer = writer
         self._calls = calls
+        self._watched = watched
         group = calls.callback_group
         for kind, suffix, callback in (
                 (ListParameters, 'list_parameters', self._list),
@@ -52,8 +53,15 @@ class ParameterServices:
                 (GetParameterTypes, 'get_parameter_types', self._get_types),
                 (SetParameters, 'set_parameters', self._set),
                 (SetParametersAtomically, 'set_parameters_atomically', self._set_atomically)):
-            node.create_service(kind, f'~/{suffix}', callback,
+            node.create_service(kind, f'~/{suffix}', self._watching(callback),
                                 qos_profile=qos_profile_parameters, callback_group=group)
+
+    def _watching(self, callback):
+        """Return ``callback`` that first notes someone looks (the refresh runs a while)."""
+        async def watched_callback(request, response):
+            self._watched()
+            return await callback(request, response)
+        return watched_callback
 
     def _local(self, name: str) -> bool:
         return self._node.has_parameter(name)
@@ -129,13 +137,23 @@ class ParameterServices:
         return response
 
     async def _set_one(self, name: str, value_message) -> SetParametersResult:
+        refusal = self._type_refusal(name, value_message)
+        if refusal:
+            return SetParametersResult(successful=False, reason=refusal)
         if self._local(name):
             return self._set_local(name, value_message)
         parameter = self._device.find(name)
         if parameter is None:
             return SetParametersResult(successful=False, reason=self._unknown(name))
         value = messages.python_value(value_message)
-        return await self._writer.set_value(parameter, value)
+        result = await self._writer.set_value(parameter, value)
+        result.reason = messages.short_reason(result.reason, value)
+        return result
+
+    def _type_refusal(self, name: str, value_message) -> str:
+        """Return why a value of an unknown type code is refused ('' if it is known)."""
+        reason = messages.type_refusal(value_message)
+        return f'{name}: {reason}: nothing written' if reason else ''
 
     def _set_local(self, name: str, value_message) -> SetParametersResult:
         """Set one of the node's own parameters, as rclpy does; read-only and unchanged: ok."""
@@ -148,12 +166,13 @@ class ParameterServices:
     async def _set_atomically(self, request, response):
         """Check every value first; refuse all if one is refused; then write in order."""
         for message in request.parameters:
-            reason = ''
-            if not self._local(message.name):
+            reason = self._type_refusal(message.name, message.value)
+            if not reason and not self._local(message.name):
                 parameter = self._device.find(message.name)
+                value = messages.python_value(message.value)
                 reason = self._unknown(message.name) if parameter is None else \
-                    await self._writer.refusal(parameter,
-                                               messages.python_value(message.value))
+                    messages.short_reason(await self._writer.refusal(parameter, value) or '',
+                                          value)
             if reason:
                 response.result = SetParametersResult(
                     successful=False, reason=f'{reason} (none of the {len(request.parameters)} '
@@ -173,5 +192,6 @@ class ParameterServices:
         return response
 
     def _unknown(self, name: str) -> str:
-        return f'{name} is not a parameter of {self._device.name} (ros2 param list shows ' \
-            'them): nothing written'
+        return messages.short_reason(
+            f'{name} is not a parameter of {self._device.name} (ros2 param list shows '
+            'them): nothing written', name)

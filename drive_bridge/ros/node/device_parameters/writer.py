@@ -14,9 +14,11 @@ goes to the bus as one job of the device's
 table's check and the monitor-only refusal again, before anything is sent; the write, RAM,
 or RAM and EEPROM with the node's ``save_to_eeprom``; its read back, with no other
 transaction between them), and awaited; the answer is the device's own refusal in words
-(FC 51: ``rejected by conv: ... not possible in the present mode``), a value that reads
-back different, a read back that failed (``written, but the read back failed``), or
-success. After a write, or a refusal, the value the device holds goes out on
+(FC 51: ``rejected by conv: ... not possible in the present mode``), or the bus's (the
+device not online yet, the bus closed or too busy to take it in time), each ending
+``nothing written`` too; a value that reads back different, a read back that failed
+(``written, but the read back failed``), a write whose answer did not come (it may have
+been written), or success. After a write, or a refusal, the value the device holds goes out on
 ``/parameter_events`` so that an editor (rqt_reconfigure) shows it.
 """
 
@@ -25,14 +27,22 @@ from typing import Any, Callable, Optional
 from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.parameters import check_value
 from drive_bridge.devices.remote_parameters import RemoteParameter, typed_value, write_refusal
-from drive_bridge.errors import DriveBridgeError, ReadBackMismatch
+from drive_bridge.errors import CommandRefused, DriveBridgeError, ReadBackMismatch
 from drive_bridge.ros.node.device_parameters.device import DeviceParameters
 from drive_bridge.ros.node.gate import CommandGate
 from drive_bridge.ros.node.service_calls import ServiceCalls
 from rcl_interfaces.msg import SetParametersResult
 
 NOTHING = 'nothing written'
+NOT_SENT = 'nothing sent'
 HELD_WAIT_S = 0.5  # after a refusal, the value held is read for this long at most
+
+
+def nothing_written(reason: str) -> str:
+    """Return the reason of a write not sent, or refused by the device, as ``nothing written``."""
+    if reason.endswith(NOT_SENT):  # the bus's words for the same
+        return reason[:-len(NOT_SENT)] + NOTHING
+    return reason if reason.endswith(NOTHING) else f'{reason}; {NOTHING}'
 
 
 class DeviceWriter:
@@ -91,7 +101,7 @@ class DeviceWriter:
         if reason:
             return f'{name}: {reason}; {NOTHING}'
         if self._gate.bus is None or not self._gate.is_active():
-            return f'{name}: {self._gate.inactive_reason().replace("nothing sent", NOTHING)}'
+            return f'{name}: {nothing_written(self._gate.inactive_reason())}'
         if not self._device.writes_allowed():
             return f'{self._device.name} is monitor only (allow_control is false): {name} ' \
                 f'not set; {NOTHING}'
@@ -106,6 +116,8 @@ class DeviceWriter:
         except ReadBackMismatch as error:
             held = self._device.shown(parameter, error.read)
             return f'{name}: wrote {value!r}, but it reads back {held!r}'
+        except CommandRefused as error:  # refused before sending, or by the device
+            return f'{name}: {nothing_written(str(error))}'
         except DriveBridgeError as error:
             return f'{name}: {error}'
         self._announce(parameter, self._device.shown(parameter, read))
