@@ -65,7 +65,11 @@ def sim():
 @pytest.fixture(scope='module')
 def node(sim, tmp_path_factory):
     with running_node(tmp_path_factory.mktemp('params') / 'parameters.yaml',
-                      {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2,
+                      # timeout 0.5 s: the simulator shares this process, and a busy
+                      # 2-core machine delays its reply past 0.2 s now and then; a set's
+                      # write and read back are never repeated, so the dump's hundred sets
+                      # failed on such a late reply ('no reply within 0.2 s')
+                      {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.5,
                        'diagnostics_period': 0.5}, DEVICES, drives=['conv', 'fan'],
                       ready=['conv', 'fan', 'main', 'spare'], namespace='/line') as client:
         client.parameters_of = ParameterClient(client)
