@@ -119,17 +119,23 @@ def test_a_call_within_its_time_waits_on():
     assert call.outcome is None
 
 
-def test_closing_the_bus_refuses_every_waiting_call_and_cancels_what_was_not_sent():
+def test_closing_the_bus_refuses_what_was_not_sent_and_confirms_nothing_on_the_wire():
+    # A call on the wire when the bus closes may have been carried out (a start may be
+    # running): it is answered "not confirmed", never "refused"; one the bus answered meanwhile
+    # keeps its answer.
     node, calls = bench()
-    waiting, running = Future(), Future()
+    waiting, running, answered = Future(), Future(), Future()
     assert running.set_running_or_notify_cancel()
-    first, second = Call(calls, waiting), Call(calls, running)
+    first, second, third = Call(calls, waiting), Call(calls, running), Call(calls, answered)
+    answered.set_result('start acknowledged')
     calls.answer_all('the bus was closed')
-    first.step()
-    second.step()
+    for call in (first, second, third):
+        call.step()
     assert waiting.cancelled() and not running.cancelled()
     assert str(first.outcome) == 'start: the bus was closed'
-    assert isinstance(second.outcome, CommandRefused)
+    assert isinstance(first.outcome, CommandRefused)
+    assert type(second.outcome) is DriveBridgeError and 'not confirmed' in str(second.outcome)
+    assert third.outcome == 'start acknowledged'
 
 
 def test_services_that_just_answered_are_destroyed_only_after_the_grace_time():

@@ -8,7 +8,8 @@ guard condition, and on the executor thread :meth:`ServiceCalls._deliver` hands 
 to the coroutine's rclpy future. A call the bus leaves waiting past its give-up time is
 answered there too: a command the bus has not taken yet is cancelled first, so it is never
 sent; one already on its way is answered as "not confirmed". :meth:`ServiceCalls.answer_all`
-refuses every waiting call when the bus is closed, cancelling what was not yet sent.
+answers every waiting call when the bus is closed: what was not yet sent is cancelled and
+refused, what was on the wire is "not confirmed", never "refused".
 
 A service that answered the last call of a closed bus is destroyed a grace time later
 (:meth:`ServiceCalls.destroy_later`): rclpy hands the response to the DDS writer and returns,
@@ -78,13 +79,28 @@ class ServiceCalls:
         self._answers.trigger()
 
     def answer_all(self, reason: str) -> None:
-        """Refuse every waiting call (the bus was closed); what was not sent never is."""
+        """
+        Answer every waiting call now (the bus was closed); what was not sent never is.
+
+        A call the bus had not taken is cancelled and refused with ``reason``; one the bus
+        answered meanwhile gets that answer; one on the wire is not confirmed (a start may
+        be running: it is no refusal).
+        """
         with self._lock:
             pending, self._pending = self._pending, []
         for call in pending:
-            if not call.ros_future.done():
-                call.bus_future.cancel()
+            if call.ros_future.done():
+                continue
+            if call.bus_future.cancel():
                 call.ros_future.set_result(CommandRefused(f'{call.label}: {reason}'))
+            elif call.bus_future.done():
+                error = call.bus_future.exception()
+                call.ros_future.set_result(error if error is not None
+                                           else call.bus_future.result())
+            else:
+                call.ros_future.set_result(DriveBridgeError(
+                    f'{call.label} not confirmed: {reason} while it was on the wire; it may '
+                    'have been carried out (see /diagnostics)'))
 
     def destroy_later(self, destroy: Callable[[], None]) -> None:
         """Run ``destroy`` (of services that just answered) a grace time from now."""
