@@ -4,6 +4,7 @@ import os
 
 import pytest
 import rclpy
+from shared_rigs import end_shared_nodes
 
 
 @pytest.fixture(scope='session', autouse=True)
@@ -11,3 +12,14 @@ def ros_context():
     rclpy.init(domain_id=int(os.environ['ROS_DOMAIN_ID']))
     yield
     rclpy.try_shutdown()
+
+
+def pytest_runtest_setup(item):
+    """
+    End the shared nodes (test/ros/shared_rigs.py) before a test that takes none.
+
+    Such a test starts a node of its own, in this process's domain, with the same node and
+    device names: the two would answer each other's clients.
+    """
+    if 'rigs' not in item.fixturenames:
+        end_shared_nodes()
