@@ -4,7 +4,7 @@ import os
 
 import pytest
 import rclpy
-from shared_rigs import end_shared_nodes
+from shared_rigs import end_shared_nodes, SharedRigs
 
 
 @pytest.fixture(scope='session', autouse=True)
@@ -12,6 +12,16 @@ def ros_context():
     rclpy.init(domain_id=int(os.environ['ROS_DOMAIN_ID']))
     yield
     rclpy.try_shutdown()
+
+
+@pytest.fixture(scope='session')
+def rigs(tmp_path_factory):
+    """Yield the shared nodes of this test process (test/ros/shared_rigs.py)."""
+    shared = SharedRigs(tmp_path_factory.mktemp('rigs'))
+    try:
+        yield shared
+    finally:
+        shared.close()
 
 
 def pytest_runtest_setup(item):

@@ -1,11 +1,12 @@
 """
-Nodes shared by the tests of a module: one per rig, brought back to rest between tests.
+Nodes shared by tests: one per rig, brought back to rest between tests.
 
 A node's start costs about 0.6 s of CPU and 1-2 s of wall time until its devices are ready,
 and its SIGTERM 0.7 s more. A test that sends the node no signal, asks it for no lifecycle
 transition and waits for no exit needs no fresh process: it takes a node from here
-(``rigs.session('mcd', **bus)``, a module fixture ``rigs`` of :class:`SharedRigs`), kept
-per rig (family, or the mixed line) and bus settings. Before a test takes a node again:
+(``with rigs.session('mcd', **bus) as session``, the fixture ``rigs`` of
+test/ros/conftest.py), kept per rig (a family, or the mixed line) and bus settings. Before
+a test takes a node again:
 
 - the simulator is back to normal: no reply hook, no silent address, no random faults;
 - every device is online and has control as configured (``allow_control`` back to true
@@ -16,13 +17,17 @@ per rig (family, or the mixed line) and bus settings. Before a test takes a node
 - the test gets a new client (a fresh record of the topics; the latched state comes again).
 
 A node that cannot be brought back so, or whose test failed, is ended (SIGTERM, its log
-printed) and the next test gets a fresh one. One node runs at a time: the nodes of a test
-process share its ROS domain, node name and device names, so two would answer each
-other's clients; a test that takes another rig ends the node before it, and a test that
-takes none (it starts a node of its own) ends every shared node first (test/ros/conftest.py:
-a test takes a shared node through the fixture named ``rigs``). Tests of one rig
-go to one pytest-xdist worker through an ``xdist_group`` mark of their own, and run one
-after another (a module's order: same rig, next to each other).
+printed) and the next test gets a fresh one. Not shared: what a node counts over its life
+(the counters in ``/diagnostics``) and what it remembers of commands (a reference
+published, an automatic start's arming); a test that judges those starts a node of its own.
+
+One node runs at a time: the nodes of a test process share its ROS domain, node name and
+device names, so two would answer each other's clients. A test that takes another rig ends
+the node before it, and a test that takes none (it starts a node of its own) ends every
+shared node first (test/ros/conftest.py; a test takes a shared node through the fixture
+named ``rigs``). The tests of one rig go to one pytest-xdist worker through the
+``xdist_group`` mark of :func:`on_rig`, whatever their module (``rigs`` lives as long as
+the worker's session), and run there one after another.
 """
 
 from contextlib import contextmanager
@@ -30,6 +35,7 @@ from typing import Any, Callable, Dict, Iterator, Tuple
 import weakref
 
 from drive_bridge.sim.faults import FaultPlan
+import pytest
 from ros_helpers import RosClient
 from safety_helpers import DriveProbe, LvsgProbe, McdProbe, MotorProbe, wait_for
 from safety_ros import call_ok, make_mixed_rig, make_rig, READY_S, Session
@@ -105,8 +111,18 @@ def end_shared_nodes() -> None:
         shared.close()
 
 
+def on_rig(rig: str, *values: Any) -> Any:
+    """
+    Return a test parameter (``values``) that runs on the shared node of ``rig``.
+
+    Its ``xdist_group`` (``rig_<rig>``) gives every test of the rig to one worker, so that
+    one node serves them; a test that is no parameter carries the mark itself.
+    """
+    return pytest.param(*values, marks=pytest.mark.xdist_group(f'rig_{rig}'))
+
+
 class SharedRigs:
-    """The nodes of a module's tests, one per rig and bus settings (module fixture)."""
+    """The shared nodes of a test process, one per rig and bus settings (fixture ``rigs``)."""
 
     def __init__(self, directory):
         self._directory = directory
@@ -116,7 +132,7 @@ class SharedRigs:
     @contextmanager
     def session(self, family: str, **bus: Any) -> Iterator[Session]:
         """Yield a node on a rig of ``family`` (:func:`make_rig`, default device settings)."""
-        with self._take(('rig', family), lambda: make_rig(family), bus) as session:
+        with self._take((family,), lambda: make_rig(family), bus) as session:
             yield session
 
     @contextmanager

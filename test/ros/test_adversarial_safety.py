@@ -32,25 +32,11 @@ from safety_ros import (
     call_later, clean_exit, Lifecycle, make_rig, parameter_value, READY_S,
     Session, start_behind_a_held_poll)
 from sensor_msgs.msg import JointState
-from shared_rigs import SharedRigs
+from shared_rigs import on_rig
 from std_srvs.srv import Trigger
 
 SCALE = 20.0  # rad/s of a joint at 100 %
 STORM_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
-
-@pytest.fixture(scope='module')
-def rigs(tmp_path_factory):
-    """
-    Nodes shared by the tests that send no signal and ask for no transition (shared_rigs).
-
-    The tests of one rig carry its ``xdist_group``: one worker runs them, one node each.
-    """
-    shared = SharedRigs(tmp_path_factory.mktemp('rigs'))
-    try:
-        yield shared
-    finally:
-        shared.close()
 
 
 def more_frames(rig, count: int, timeout_s: float = 20.0) -> bool:
@@ -114,10 +100,10 @@ def started_then_in_hand_on(client, rig):
 
 
 # -- a start and a stop in one gap ----------------------------------------------------------
-@pytest.mark.parametrize('family, stop_kind', [  # a family's next to each other: one node
-    ('mcd', 'stop'), ('mcd', 'quick_stop'), ('fc', 'stop'), ('fc', 'quick_stop'),
-    ('fc', 'coast_stop'), ('lvsg', 'stop'), ('lvsg', 'quick_stop')])
-@pytest.mark.xdist_group('adversarial_rigs')
+@pytest.mark.parametrize('family, stop_kind', [
+    on_rig(family, family, stop_kind) for family, stop_kind in (
+        ('mcd', 'stop'), ('fc', 'stop'), ('lvsg', 'stop'), ('mcd', 'quick_stop'),
+        ('fc', 'quick_stop'), ('fc', 'coast_stop'), ('lvsg', 'quick_stop'))])
 def test_stop_queued_behind_a_start_in_the_same_gap_wins(family, stop_kind, rigs):
     """
     A start, then a stop (``stop_kind``), both waiting while a poll holds the bus: still.
@@ -149,7 +135,7 @@ def test_stop_queued_behind_a_start_in_the_same_gap_wins(family, stop_kind, rigs
 
 
 @pytest.mark.parametrize('target', ['starter', 'conv', 'mixer'])
-@pytest.mark.xdist_group('adversarial_mixed')
+@pytest.mark.xdist_group('rig_mixed')
 def test_start_and_stop_queued_while_another_device_is_polled(target, rigs):
     """
     A four-device line: a poll of the fan holds the bus; a start then a stop for ``target``.
@@ -182,7 +168,7 @@ def test_start_and_stop_queued_while_another_device_is_polled(target, rigs):
                 assert other.start_edges() == 0, name
 
 
-@pytest.mark.xdist_group('adversarial_rigs')
+@pytest.mark.xdist_group('rig_mcd')
 def test_start_stop_storm_from_three_clients_ends_as_the_last_success(rigs):
     """
     Three clients call start and stop at random, overlapping: the starter ends as asked.
@@ -266,8 +252,7 @@ def test_start_stop_storm_from_three_clients_ends_as_the_last_success(rigs):
 
 
 # -- allow_control switched off ---------------------------------------------------------------
-@pytest.mark.parametrize('family', ['mcd', 'fc', 'lvsg'])
-@pytest.mark.xdist_group('adversarial_rigs')
+@pytest.mark.parametrize('family', [on_rig(family, family) for family in ('mcd', 'fc', 'lvsg')])
 def test_monitor_only_set_while_a_start_waits_for_the_bus(family, rigs):
     """
     A start waits behind a held poll; allow_control false comes meanwhile.
@@ -580,8 +565,8 @@ def test_deadman_stops_the_drive_on_a_slow_bus_when_commands_stop(topic, tmp_pat
 OUTAGE_BUS = {'timeout': 0.2, 'retries': 0, 'offline_after': 2, 'backoff_max': 0.5}
 
 
-@pytest.mark.parametrize('family', ['fc', 'vlt', 'lvsg'])
-@pytest.mark.xdist_group('adversarial_outage')
+@pytest.mark.parametrize('family', [
+    on_rig(f'outage_{family}', family) for family in ('fc', 'vlt', 'lvsg')])
 def test_cyclic_run_is_not_resumed_after_an_outage(family, rigs):
     """
     A running drive (or gateway) stops answering, then answers: it gets stop images only.
@@ -621,7 +606,7 @@ def run_flags(probe) -> List[bool]:
     return [image.fwd_run for image in probe.images()]
 
 
-@pytest.mark.xdist_group('adversarial_outage')
+@pytest.mark.xdist_group('rig_outage_mcd')
 def test_starter_stopped_locally_during_an_outage_is_not_restarted(rigs):
     """An MCD starter runs, goes silent, is stopped at its keypad, answers: no start again."""
     with rigs.session('mcd', **OUTAGE_BUS) as session:
@@ -723,8 +708,8 @@ def mcd_start_frames(server, unit: int) -> int:
 
 @pytest.mark.parametrize('round_', range(3))
 @pytest.mark.parametrize('when', ['offline', 'just_silent'])
-@pytest.mark.parametrize('family', ['mcd', 'fc'])
-@pytest.mark.xdist_group('adversarial_outage')
+@pytest.mark.parametrize('family', [
+    on_rig(f'outage_{family}', family) for family in ('mcd', 'fc')])
 def test_start_asked_during_an_outage_as_the_device_comes_back(family, when, round_, rigs):
     """
     A start asked for in an outage; the device answers again 0-0.6 s later.
