@@ -38,12 +38,12 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'drive_bridge_node = drive_bridge.ros.entry:main',
+            'drive_bridge_node = drive_bridge.ros.node.entry:main',
             'drive_bridge_sim = drive_bridge.sim.cli:main',
             'drive-bridge = drive_bridge.tools.cli:main',
             'drive_bridge_plot = drive_bridge.tools.plot_recording:main',
-            'drive_bridge_record = drive_bridge.ros.record:main',
-            'drive_bridge_ctl = drive_bridge.ros.ctl:main',
+            'drive_bridge_record = drive_bridge.ros.record.cli:main',
+            'drive_bridge_ctl = drive_bridge.ros.ctl.cli:main',
         ],
     },
 )

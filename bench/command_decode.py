@@ -9,7 +9,7 @@ rclpy. Timed in this process, one thread, ``time.thread_time`` over many message
   ``raw=True`` does per message: the C deserializer, then the message's Python class built
   through its constructor and property setters, with ``ROS_PYTHON_CHECK_FIELDS`` as set),
   then the names and velocities taken as tuples;
-- ``wire.py``: :func:`drive_bridge.ros.joints.wire.read_joint_command` on the same bytes.
+- ``wire.py``: :func:`drive_bridge.ros.node.joints.wire.read_joint_command` on the same bytes.
 
 Prints microseconds of CPU a message (median of 5 rounds) and what 100 messages a second
 cost in % of one core. The machine and its load are printed first and last.
@@ -25,7 +25,7 @@ from paced_line import conditions, ros_environment
 import thread_cpu
 
 ros_environment()
-from drive_bridge.ros.joints import wire  # noqa: E402, I100 - after the environment it reads
+from drive_bridge.ros.node.joints import wire  # noqa: E402, I100 - after the environment it reads
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 

@@ -22,9 +22,9 @@ import sys
 import time
 from typing import Dict, Optional, Tuple
 
-from drive_bridge.devices import fc, mcd
-from drive_bridge.devices.drive import DriveProfile
-from drive_bridge.protocol import fc_control, rtu
+from drive_bridge.devices import fc51, mcd
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
+from drive_bridge.protocol import fc_profile, rtu
 from drive_bridge.protocol.commands import Command
 from drive_bridge.sim.wire_pacer import LineTiming, MASTER
 from paced_line import (
@@ -49,8 +49,8 @@ def command_frame(block: Dict, command: str) -> bytes:
     if block['family'] == 'mcd':
         return rtu.write_register_request(unit, mcd.REGISTER['command'].address,
                                           mcd.COMMAND_VALUES[typed]).encode()
-    write = DriveProfile(fc.DATA, block['model']).process_write(
-        fc_control.COMMAND_WORDS[typed], 0)  # speed_reference 0: reference word 0
+    write = FcProfileModbusDrive(fc51.DATA, block['model']).process_write(
+        fc_profile.COMMAND_WORDS[typed], 0)  # speed_reference 0: reference word 0
     return write.frame(unit).encode()
 
 

@@ -18,9 +18,9 @@ import time
 
 from drive_bridge.bus.events import ReadingEvent
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
-from drive_bridge.devices import fc
+from drive_bridge.devices import fc51
 from drive_bridge.devices.contracts import SlowReadouts
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
 from drive_bridge.devices.fc_protocol_drive import FcProtocolDriveProfile
 from drive_bridge.protocol import fc_telegram as fcp
 from drive_bridge.sim.wire_pacer import LineTiming, MODBUS_GAP_CHARACTERS, transactions
@@ -38,9 +38,9 @@ def make_bus(line: PacedSimulator, protocol: str, readings: list) -> BusMaster:
                             timeout_s=0.5)  # the pty takes N; the pacer times 8E1
     slow = SlowReadouts(READOUT_PERIOD_S)
     if protocol == 'fc_protocol':
-        profile = FcProtocolDriveProfile(fc.DATA, 'fc51', slow_readouts=slow)
+        profile = FcProtocolDriveProfile(fc51.DATA, 'fc51', slow_readouts=slow)
     else:
-        profile = DriveProfile(fc.DATA, 'fc51', slow_readouts=slow)
+        profile = FcProfileModbusDrive(fc51.DATA, 'fc51', slow_readouts=slow)
     return BusMaster(make_transport(settings),
                      [DeviceSpec('conv', 1, profile, poll_rate_hz=100.0)],
                      BusTiming(frame_gap_s=line.timing.gap_s),  # the 8E1 gap, not 8N1's

@@ -2,8 +2,8 @@
 Bytes and line time per poll: the Danfoss FC protocol against Modbus RTU, same drive data.
 
 Both sides are computed from the encoders, not from formulas. Modbus RTU: the transactions
-:class:`drive_bridge.devices.drive.DriveProfile` plans for a started FC 51 today (one 0F
-write of coils 1-32, one 01 read of coils 33-64, one 03 read of 16-14, one rotating
+:class:`drive_bridge.devices.fc_profile_drive.FcProfileModbusDrive` plans for a started FC 51
+today (one 0F write of coils 1-32, one 01 read of coils 33-64, one 03 read of 16-14, one rotating
 readout), each request and reply encoded by :mod:`drive_bridge.protocol.rtu`; line time
 with a 3.5-character gap before each frame. FC protocol: one telegram carrying control word,
 reference, status word, main actual value and one parameter read (16-14), and, for the
@@ -15,10 +15,10 @@ Run: .venv/bin/python bench/fc_protocol_wire.py
 
 from typing import List, Tuple
 
-from drive_bridge.devices import fc as fc_family
+from drive_bridge.devices import fc51 as fc_family
 from drive_bridge.devices.contracts import FixedControl
-from drive_bridge.devices.drive import DriveProfile
-from drive_bridge.protocol import fc_control, fc_telegram as fcp, rtu
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
+from drive_bridge.protocol import fc_profile, fc_telegram as fcp, rtu
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.fc_telegram import FcTelegramRequest
 from drive_bridge.protocol.requests import ReadCoils, ReadRegisters, WriteCoils
@@ -48,7 +48,7 @@ def modbus_frames(transaction) -> Tuple[bytes, bytes]:
 
 def modbus_polls(count: int) -> List[List[Tuple[str, bytes, bytes]]]:
     """Return ``count`` consecutive polls of a started FC 51 as (key, request, reply)."""
-    profile = DriveProfile(fc_family.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc_family.DATA, 'fc51')
     profile._identified = True  # past the one-off identification reads
     started = FixedControl(Command.START, 0x2000)  # the keepalive write is sent
     return [[(type(request).__name__, *modbus_frames(request))
@@ -92,16 +92,16 @@ def line_time_ms(exchanges, baudrate: int, gap_characters: float) -> float:
 
 def main() -> None:
     polls = modbus_polls(len(fc_family.READOUTS['fc51']) - 1)  # one full rotation
-    print('Modbus RTU, one poll of a started FC 51 (DriveProfile.poll):')
+    print('Modbus RTU, one poll of a started FC 51 (FcProfileModbusDrive.poll):')
     for key, request, reply in polls[0]:
         print(f'  {key[:40]:40s} request {len(request):2d} B  reply {len(reply):2d} B')
     rotating = sorted({len(request) + len(reply) for poll in polls
                        for key, request, reply in poll[3:]})
     print(f'  rotating readouts over one rotation: {rotating} bytes per transaction')
-    control = fcp.read_parameter_request(1614, control_word=fc_control.START_WORD,
+    control = fcp.read_parameter_request(1614, control_word=fc_profile.START_WORD,
                                          reference=0x2000)
     one = [fc_exchange(control, double_word=True)]
-    rotating_fc = fcp.read_parameter_request(1690, control_word=fc_control.START_WORD,
+    rotating_fc = fcp.read_parameter_request(1690, control_word=fc_profile.START_WORD,
                                              reference=0x2000)
     two = one + [fc_exchange(rotating_fc, double_word=True)]
     print(f'FC protocol telegram: request {len(one[0][0])} B, reply {len(one[0][1])} B')

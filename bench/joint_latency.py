@@ -33,9 +33,9 @@ import threading
 import time
 from typing import Dict, List, Optional, Tuple
 
-from drive_bridge.devices import fc
-from drive_bridge.devices.drive import DriveProfile
-from drive_bridge.protocol import fc_control, fc_telegram
+from drive_bridge.devices import fc51
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
+from drive_bridge.protocol import fc_profile, fc_telegram
 from drive_bridge.protocol.commands import Command
 from drive_bridge.sim.wire_pacer import LineTiming, MASTER, WireFrame
 from joint_cpu import devices, SCALE, start_drives
@@ -56,8 +56,8 @@ FRAME_TIMEOUT_S = 3.0
 # the step is chosen 0.5 ms before its frame, and the message takes a moment to reach the bus.
 MISS_ALLOWANCE_S = 0.005
 SEED = 29
-RUN_WORD = fc_control.COMMAND_WORDS[Command.START]
-PROFILE = DriveProfile(fc.DATA, 'fc51')
+RUN_WORD = fc_profile.COMMAND_WORDS[Command.START]
+PROFILE = FcProfileModbusDrive(fc51.DATA, 'fc51')
 DEFAULT_CONFIGS = ('modbus_rtu:38400:2', 'modbus_rtu:115200:8', 'fc_protocol:38400:2',
                    'fc_protocol:115200:8')
 

@@ -30,7 +30,7 @@ import sys
 import time
 from typing import Dict, Tuple
 
-from drive_bridge.devices.drive import COIL_STATUS, PROCESS_COILS
+from drive_bridge.devices.fc_profile_drive import COIL_STATUS, PROCESS_COILS
 from drive_bridge.errors import TransportError
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadCoils, ReadRegisters

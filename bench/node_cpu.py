@@ -43,7 +43,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 from std_msgs.msg import Float32, String, UInt16, UInt32  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-# Every topic a device may have and its type, as the node publishes them (ros/publishers.py).
+# Every topic a device may have and its type, as the node publishes them (ros/node/publishers.py).
 DEVICE_TOPICS = {'state': String, 'trip': String, 'status_word': UInt16, 'trip_code': UInt16,
                  'motor_current': Float32, 'motor_temperature': Float32,
                  'speed_feedback': Float32, 'alarm_word': UInt32, 'warning_word': UInt32}

@@ -15,7 +15,7 @@ import tempfile
 import time
 from typing import Dict, List, Sequence, Tuple
 
-from drive_bridge.config import write_params_file
+from drive_bridge.config.params_file import write_params_file
 from drive_bridge.sim.wire_pacer import LineTiming, transactions, wire_fraction, WirePacer
 
 TEST_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'test')
@@ -87,7 +87,7 @@ class NodeProcess:
     """``drive_bridge_node`` in a subprocess with a params file for ``bus`` and ``devices``."""
 
     def __init__(self, bus: Dict, devices: Dict[str, Dict],
-                 main: Sequence[str] = ('-m', 'drive_bridge.ros.entry'), source: str = ''):
+                 main: Sequence[str] = ('-m', 'drive_bridge.ros.node.entry'), source: str = ''):
         """
         Start the node; ``main``: the interpreter arguments that run it.
 

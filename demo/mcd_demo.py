@@ -76,7 +76,7 @@ def main():
                             'mcd500:20', '--link', LINK, '--start-time', '3',
                             '--stop-time', '2'], stdout=subprocess.PIPE, text=True)
     assert sim.stdout.readline().startswith('pty:')
-    bridge = subprocess.Popen([sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args',
+    bridge = subprocess.Popen([sys.executable, '-m', 'drive_bridge.ros.node.entry', '--ros-args',
                                '--params-file', os.path.join(ROOT, 'config', 'demo_mcd500.yaml')])
     rclpy.init()
     node = rclpy.create_node('drive_bridge_demo')

@@ -124,7 +124,7 @@ def start(command: List[str], **options) -> subprocess.Popen:
 def record(args: argparse.Namespace) -> None:
     """Run the simulators, the node and the recorder, and drive the two devices."""
     import rclpy
-    from drive_bridge.config import write_params_file
+    from drive_bridge.config.params_file import write_params_file
     link = os.path.join(tempfile.mkdtemp(), 'tty_record')
     sim = start([sys.executable, '-m', 'drive_bridge.sim.cli', '--device', 'mcd500:20',
                  '--device', 'fc51:1', '--link', link, '--start-time', '3', '--stop-time', '2',
@@ -132,9 +132,9 @@ def record(args: argparse.Namespace) -> None:
     assert sim.stdout.readline().startswith('pty:')
     params = write_params_file(os.path.join(os.path.dirname(link), 'params.yaml'),
                                dict(BUS, port=link), DEVICES)
-    bridge = start([sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args',
+    bridge = start([sys.executable, '-m', 'drive_bridge.ros.node.entry', '--ros-args',
                     '--params-file', params, '-r', f'__ns:={NAMESPACE}'])
-    recorder = start([sys.executable, '-m', 'drive_bridge.ros.record', '--all', '--namespace',
+    recorder = start([sys.executable, '-m', 'drive_bridge.ros.record.cli', '--all', '--namespace',
                       NAMESPACE, '-o', args.bag])
     rclpy.init()
     session = Session()

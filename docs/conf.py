@@ -50,7 +50,7 @@ def _missing(name: str) -> bool:
 from sphinx.ext.autodoc.mock import mock  # noqa: E402 - Sphinx is there when this runs
 
 with mock([name for name in ROS_MODULES if _missing(name)]):
-    for module in ('drive_bridge.ros.record', 'drive_bridge.ros.ctl'):
+    for module in ('drive_bridge.ros.record.cli', 'drive_bridge.ros.ctl.cli'):
         importlib.import_module(module)
 
 source_suffix = {'.md': 'markdown'}

@@ -115,6 +115,10 @@ class CommandExpired(CommandRefused):
     """A command that did not reach the wire within its deadline: it is never sent."""
 
 
+class ReadBackMismatch(DriveBridgeError):
+    """A parameter written reads back another value: the device holds that one."""
+
+
 class ModelMismatch(DriveBridgeError):
     """The device reports another model than the configuration names."""
 

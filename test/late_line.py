@@ -20,7 +20,7 @@ import time
 from typing import Callable, List, Optional, Tuple
 
 from drive_bridge.protocol import ap_ascii, rtu
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.sim.pty_link import PtyLink
 
 Script = Callable[[int, object], List[Tuple[float, bytes]]]  # (request index, request)
@@ -32,7 +32,7 @@ def rtu_requests(buffer: bytes) -> Tuple[Optional[object], int]:
 
 
 def fc_requests(buffer: bytes) -> Tuple[Optional[object], int]:
-    result = fc.decode(buffer)
+    result = fc_telegram.decode(buffer)
     return result.telegram, result.consumed
 
 

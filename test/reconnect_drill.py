@@ -27,7 +27,7 @@ from typing import Callable, Dict, List, Optional, Type
 
 from drive_bridge.bus.events import BusEvent, DeviceOffline, DeviceOnline
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config
+from drive_bridge.config.model import build_config
 from drive_bridge.sim.devices import make_device, make_sim_server
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 

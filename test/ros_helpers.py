@@ -10,7 +10,7 @@ import time
 from typing import Dict, Iterator, List, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
-from drive_bridge.config import write_params_file
+from drive_bridge.config.params_file import write_params_file
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 import rclpy
@@ -36,7 +36,7 @@ def start_node(params_file: str, namespace: str = '',
     non-interactive shell's background job inherits SIGINT ignored). ``remaps``: more
     ``-r FROM:=TO`` rules.
     """
-    command = [sys.executable, '-m', 'drive_bridge.ros.entry', '--ros-args',
+    command = [sys.executable, '-m', 'drive_bridge.ros.node.entry', '--ros-args',
                '--params-file', params_file]
     if namespace:
         command += ['-r', f'__ns:={namespace}']

@@ -7,7 +7,7 @@ of :data:`soak_harness.broken.VARIANTS`. Never run it against real equipment.
 
 import sys
 
-from drive_bridge.ros import process
+from drive_bridge.ros.node import process
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
 from soak_harness.broken import broken
 

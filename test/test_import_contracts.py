@@ -1,11 +1,12 @@
 """
 Architecture: the import contracts of ``.importlinter`` hold, and they catch a violation.
 
-``lint-imports`` checks the package's layers, that only ``ros`` imports rclpy and only
-``transport`` pymodbus and pyserial, that nothing imports test code, and that no package has
-an import cycle among its modules. The second test breaks a copy of the package on purpose
-and asserts that each contract so broken is reported: a checker that cannot fail proves
-nothing.
+``lint-imports`` checks the package's layers, that the ROS products (the node,
+``drive_bridge_ctl``, the recorder) never import each other, that only ``ros`` imports rclpy
+and only ``transport`` pymodbus and pyserial, that nothing imports test code, and that no
+package has an import cycle among its modules. The second test breaks a copy of the package
+on purpose and asserts that each contract so broken is reported: a checker that cannot fail
+proves nothing.
 """
 
 import os
@@ -33,16 +34,20 @@ sys.exit(lint_imports(config_filename=sys.argv[1], no_cache=True, no_logo=True))
 # name as lint-imports reports it broken.
 VIOLATIONS: Dict[str, str] = {
     'bus/events.py': 'import rclpy  # noqa',
+    'config/params_file.py': 'from drive_bridge.config import model  # noqa',
     'devices/mcd.py': 'from drive_bridge.sim import mcd_model  # noqa',
     'protocol/crc.py': 'import serial  # noqa',
+    'ros/ctl/session.py': 'from drive_bridge.ros.node import command_inputs  # noqa',
     'tools/cli_target.py': 'import soak_harness  # noqa',
     'transport/link.py': 'from drive_bridge.transport import engines  # noqa',
 }
 BROKEN = ('Layers: each imports only the layers below it',
+          'The ROS products never import each other: the node, drive_bridge_ctl, the recorder',
           'Only ros imports rclpy and the ROS message packages',
           'Only transport imports pymodbus and pyserial',
           'Nothing in the package imports the tests, the benches or their helpers',
-          'No import cycle between the modules of any one package')
+          'No import cycle between the modules of any one package',
+          "config: the node's parameter names above the settings model")
 
 
 def lint_imports(package_parent: str = ROOT) -> subprocess.CompletedProcess:
@@ -74,5 +79,7 @@ def test_each_contract_catches_a_violation(tmp_path):
     assert 'drive_bridge.bus.events -> rclpy' in report
     assert 'drive_bridge.devices is not allowed to import drive_bridge.sim' in report
     assert 'drive_bridge.protocol.crc -> serial' in report
+    assert 'drive_bridge.ros.ctl is not allowed to import drive_bridge.ros.node' in report
+    assert 'drive_bridge.ros.ctl.session -> drive_bridge.ros.node.command_inputs' in report
     assert 'drive_bridge.tools.cli_target -> soak_harness' in report
     assert 'No cycles are allowed in drive_bridge.transport' in report

@@ -10,7 +10,7 @@ Taken from the declarations themselves (:mod:`drive_bridge.config`, each protoco
 from dataclasses import dataclass
 from typing import Any, Dict, List, Tuple
 
-from drive_bridge import config
+from drive_bridge.config import model as config
 from drive_bridge.devices.registry import FAMILIES
 from drive_bridge.settings import Setting
 from drive_bridge.sim.registry import SIMULATORS

@@ -11,7 +11,7 @@ Sources, in order of weight:
   7.1.1 (16-90/16-92/16-94 bit tables);
 - ``shared/research/protocols.md`` "FC-series parameters" (readouts 15-xx/16-xx with their
   type, conversion index and a confirmed/inferred/open status);
-- :mod:`drive_bridge.devices.fc` (the bridge's own entries; same type and conversion here);
+- :mod:`drive_bridge.devices.fc51` (the bridge's own entries; same type and conversion here);
 - the FC series' Design Guides, "Network Configuration" (FC 111 section 8.7, FC 300 and VLT
   AQUA section 7.3.1, public copies found with the search tool): 8-30 Protocol (FC or Modbus
   RTU), 8-31 Address, 8-32 Baud Rate (2400-115200), 8-33 Parity/Stop Bits (even parity,

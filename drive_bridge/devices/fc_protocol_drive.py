@@ -25,14 +25,15 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, ParameterAccess, ParameterOptions, ParameterPlan, PollCycle,
     PollShape, PollStep, SlowReadouts)
-from drive_bridge.devices.drive import (
-    ALWAYS_READ, control_word_for, DriveFamilyData, FcProfileDrive, timeout_parameters)
+from drive_bridge.devices.fc_profile_drive import (
+    control_word_for, DriveFamilyData, FcProfileDrive, timeout_parameters)
+from drive_bridge.devices.fc_profile_reading import ALWAYS_READ
 from drive_bridge.devices.parameters import (
     DATA_TYPES, decode_value, encode_value, ParameterSpec, TEXT)
 from drive_bridge.errors import CommandRefused, ConfigError, DeviceException, ProtocolError
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.commands import Command
-from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.fc_profile import StatusWord
 from drive_bridge.protocol.fc_telegram import FcTelegram, FcTelegramRequest
 from drive_bridge.protocol.requests import Request
 
@@ -114,8 +115,8 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
     def _read_request(spec: ParameterSpec, control_word: int = IGNORED_CONTROL_WORD,
                       reference: int = 0, index: int = 0) -> FcTelegramRequest:
         if spec.data_type == TEXT:
-            return fc.read_text_request(spec.number, index, control_word, reference)
-        return fc.read_parameter_request(spec.number, index, control_word, reference)
+            return fc_telegram.read_text_request(spec.number, index, control_word, reference)
+        return fc_telegram.read_parameter_request(spec.number, index, control_word, reference)
 
     def _value(self, spec: ParameterSpec, reply: FcTelegram) -> Any:
         """Return the value a reply carries for ``spec``, in display units."""
@@ -129,7 +130,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
     # -- commands -----------------------------------------------------------------------
     def command_plan(self, command: Command, control: ControlView) -> CommandPlan:
         """Return the process telegrams of ``command`` (with the reference in force)."""
-        return CommandPlan(command, tuple(fc.process_request(word, control.reference_word)
+        return CommandPlan(command, tuple(fc_telegram.process_request(word, control.reference_word)
                                           for word in self.command_words(command)))
 
     def describe_control(self, control: ControlView) -> str:
@@ -154,7 +155,7 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
                        options: ParameterOptions = ParameterOptions()) -> ParameterPlan:
         """Return the telegram reading (value None) or writing parameter ``number``."""
         spec = self.data.spec(number, options.data_type, options.conversion, self.default_model)
-        if not 0 < number <= fc.PNU_MASK:
+        if not 0 < number <= fc_telegram.PNU_MASK:
             raise CommandRefused(f'parameter {number} has no FC-protocol number (PNU 1-4095)')
         index = options.index or 0
         if value is None:
@@ -174,11 +175,11 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
                 if len(value) > spec.characters:
                     raise CommandRefused(f'{spec.name}: {value!r} is longer than '
                                          f'{spec.characters} characters')
-                return fc.write_text_request(spec.number, value, index)
+                return fc_telegram.write_text_request(spec.number, value, index)
             words = encode_value(spec, value, self.data.conversion_factors)
             double = len(words) == 2
             raw = words[0] << 16 | words[1] if double else words[0]
-            return fc.write_parameter_request(spec.number, raw, double, eeprom, index)
+            return fc_telegram.write_parameter_request(spec.number, raw, double, eeprom, index)
         except ProtocolError as error:
             raise CommandRefused(f'{spec.name}: {error}') from None
 
@@ -192,4 +193,4 @@ class FcProtocolDriveProfile(FcProfileDrive, ParameterAccess):
 
     def explain_exception(self, code: int, detail: Optional[int] = None) -> str:
         """Return technician text for the error code of an AK 7 reply."""
-        return fc.explain_error(code)
+        return fc_telegram.explain_error(code)

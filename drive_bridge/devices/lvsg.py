@@ -20,12 +20,13 @@ from typing import Any, Dict, FrozenSet, Mapping, Optional
 from drive_bridge.devices.contracts import (
     CommandPlan, ControlView, CyclicControl, DeviceProfile, DeviceReading, Family, Freshness,
     PollCycle, PollShape, PollStep, SlowReadouts, TRIP_CODE_UNKNOWN)
+from drive_bridge.devices.lvsg_image import GatewayImage
 from drive_bridge.errors import CommandRefused, ConfigError, ModelMismatch, ProtocolError
 from drive_bridge.protocol import lvsg
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.lvsg import Control
-from drive_bridge.protocol.requests import ReadRegisters, Request, WriteRegister, WriteRegisters
-from drive_bridge.protocol.words import bit, bytes_to_registers, registers_to_bytes
+from drive_bridge.protocol.requests import Request
+from drive_bridge.protocol.words import bit
 from drive_bridge.settings import Setting
 
 FAMILY = 'lvsg'
@@ -202,7 +203,13 @@ class StarterState:
 
 
 class LvsgProfile(DeviceProfile, CyclicControl):
-    """Process image, decode and commands of one MCD 200 behind a Profibus gateway."""
+    """
+    Poll cycle, decode and commands of one MCD 200 behind a Profibus gateway.
+
+    The process image travels through a :class:`~drive_bridge.devices.lvsg_image.GatewayImage`
+    (``gateway``: where the bytes sit, the control bits the gateway holds); the operating
+    parameters are :class:`OperatingParameters`, the starter's state :class:`StarterState`.
+    """
 
     family = FAMILY
     commands = frozenset({Command.START, Command.STOP, Command.QUICK_STOP, Command.RESET})
@@ -218,28 +225,11 @@ class LvsgProfile(DeviceProfile, CyclicControl):
                               f'{BYTE_ORDERS}')
         super().__init__(model)
         self.current_scale = current_scale
-        self.input_register = input_register
-        self.output_register = output_register
-        self.byte_order = byte_order
         self.extended = module == 'extended'
-        self.input_bytes = lvsg.EXTENDED_INPUT_BYTES if self.extended else \
-            lvsg.BASIC_INPUT_BYTES
-        self.output_bytes = lvsg.EXTENDED_OUTPUT_BYTES if self.extended else \
-            lvsg.BASIC_OUTPUT_BYTES
-        self.image: Optional[Control] = None  # the gateway's control bits (None: not read yet)
+        self.gateway = GatewayImage(input_register, output_register, byte_order, self.extended)
         self.operating = OperatingParameters(slow_readouts or SlowReadouts(0.0))
         self.starter = StarterState()
         self.hazard = ''
-
-    @property
-    def input_registers(self) -> int:
-        """Return how many registers hold the input bytes."""
-        return (self.input_bytes + 1) // 2
-
-    @property
-    def output_registers(self) -> int:
-        """Return how many registers hold the output bytes."""
-        return (self.output_bytes + 1) // 2
 
     @property
     def reading_fields(self) -> FrozenSet[str]:
@@ -250,7 +240,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
 
     def on_offline(self) -> None:
         """Forget the image and the answers: after a reconnect the image is read again."""
-        self.image = None
+        self.gateway.forget()
         self.operating.forget()
         self.starter = StarterState()
         self.hazard = ''
@@ -265,19 +255,9 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             return Control(quick_stop=True)
         return Control()
 
-    def request_write(self) -> WriteRegister:
-        """Return the write of the register holding the parameter request (output byte 2)."""
-        image = self.image_write(self.image or Control())  # extended: two registers
-        return WriteRegister(self.output_register + 1, image.values[1])
-
     def image_write(self, control: Control) -> Request:
         """Return the write of the whole output image carrying ``control``."""
-        registers = bytes_to_registers(
-            replace(control, parameter_request=self.operating.request).encode(self.extended),
-            self.byte_order)
-        if len(registers) == 1:
-            return WriteRegister(self.output_register, registers[0])
-        return WriteRegisters(self.output_register, tuple(registers))
+        return self.gateway.write(control, self.operating.request)
 
     def poll_shape(self) -> PollShape:
         """Return the image (or request) write, the input read, Fwd Run cleared; read-back."""
@@ -285,13 +265,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
 
     def describe_control(self, control: ControlView) -> str:
         """Return the control bits the gateway holds, in words."""
-        image = self.image
-        if image is None:
-            return 'not read yet'
-        bits = [name for name, on in (('Fwd Run', image.fwd_run),
-                                      ('Quick Stop', image.quick_stop)) if on]
-        owner = 'written by the bridge' if control.steady is not None else 'as read back'
-        return f'{", ".join(bits) or "no control bits"} ({owner})'
+        return self.gateway.describe(control.steady)
 
     # -- polling ------------------------------------------------------------------------
     def poll(self, control: ControlView, now_s: float) -> PollCycle:
@@ -306,23 +280,22 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         allowed before a command, or reported as a hazard when nothing may be written.
         """
         self.operating.read.begin_poll()
-        first_contact = self.image is None
+        gateway = self.gateway
+        first_contact = gateway.image is None
         if first_contact:
-            self._adopt((yield PollStep(ReadRegisters(self.output_register,
-                                                      self.output_registers), optional=True)))
+            gateway.adopt((yield PollStep(gateway.read_back(), optional=True)))
         steady = control.steady
         if steady is not None and control.writes_allowed:
-            self.image = self.control_for(steady)
-            yield PollStep(self.image_write(self.image), optional=True, retry=False)
+            gateway.image = self.control_for(steady)
+            yield PollStep(self.image_write(gateway.image), optional=True, retry=False)
         elif self.extended and control.writes_allowed and not first_contact:
             # Not at first contact: a Fwd Run found in the gateway is dealt with first.
-            yield PollStep(self.request_write(), optional=True, retry=False)
-        registers = yield PollStep(ReadRegisters(self.input_register, self.input_registers),
-                                   stamps=True)
+            yield PollStep(gateway.request_write(self.operating.request), optional=True,
+                           retry=False)
+        registers = yield PollStep(gateway.read_input(), stamps=True)
         if not isinstance(registers, list):
             raise ProtocolError('input image missing from the replies')
-        status = lvsg.decode_status(registers_to_bytes(registers, self.input_bytes,
-                                                       self.byte_order))
+        status = gateway.decode_input(registers)
         self.operating.note(status, control.steady)  # in force when the status was read
         if self.extended:
             self.operating.take_answer(status, now_s)
@@ -333,7 +306,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
 
     def _clear_unasked_fwd_run(self, status: lvsg.Status, control: ControlView):
         """Write Fwd Run clear if the gateway holds it for a starter that is not on."""
-        image = self.image
+        image = self.gateway.image
         if image is None or not image.fwd_run or status.on:
             self.hazard = ''
             return
@@ -349,16 +322,8 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             self.hazard = ('HAZARD: the gateway holds Fwd Run for a starter that is not on and '
                            f'clearing it failed ({result}); it will be tried again')
             return
-        self.image = cleared
+        self.gateway.image = cleared
         self.hazard = ''
-
-    def _adopt(self, result) -> None:
-        if isinstance(result, list):
-            control = Control.decode(registers_to_bytes(result, self.output_bytes,
-                                                        self.byte_order))
-        else:  # the gateway cannot read its outputs back: take all bits as clear
-            control = Control()
-        self.image = replace(control, reset=False)
 
     def _resolve_model(self) -> None:
         reported = self.operating.reported_model()
@@ -376,7 +341,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
         trip_code, state_byte = lvsg.split_state_parameter(state_value) \
             if state_value is not None else (None, None)
         state = self.starter.decide(status, state_byte, operating.run_dropped,
-                                    bool(self.image and self.image.fwd_run))
+                                    self.gateway.fwd_run)
         reading = DeviceReading(state=state, status_word=status_word(status))
         if status.fault:
             fill_trip(reading, trip_code, self.extended)
@@ -403,8 +368,8 @@ class LvsgProfile(DeviceProfile, CyclicControl):
             'ready': str(status.ready), 'on': str(status.on), 'fault': str(status.fault),
             'ramping': str(status.ramping),
             'motor_current_pct_flc': f'{status.current_pct_flc:.0f}',
-            'gateway_fwd_run': str(bool(self.image and self.image.fwd_run)),
-            'gateway_quick_stop': str(bool(self.image and self.image.quick_stop)),
+            'gateway_fwd_run': str(self.gateway.fwd_run),
+            'gateway_quick_stop': str(self.gateway.quick_stop),
         }
         product = self.operating.read.get(lvsg.PARAMETER_PRODUCT)
         if product is not None:
@@ -421,7 +386,7 @@ class LvsgProfile(DeviceProfile, CyclicControl):
     # -- commands -----------------------------------------------------------------------
     def command_plan(self, command: Command, control: ControlView) -> CommandPlan:
         """Return the output-image writes of ``command``."""
-        base = self.image or Control()
+        base = self.gateway.image or Control()
         if command is Command.START:
             steps = [Control(fwd_run=True)]
         elif command is Command.STOP:

@@ -12,7 +12,7 @@ from typing import Any, Dict, Mapping, Optional
 from drive_bridge.console import parse_number
 from drive_bridge.devices import mcd_parameters
 from drive_bridge.devices.contracts import DeviceProfile, ParameterAccess, ParameterOptions
-from drive_bridge.devices.drive import FcProfileDrive
+from drive_bridge.devices.fc_profile_drive import FcProfileDrive
 from drive_bridge.devices.parameters import ParameterSpec, TEXT
 
 RAW_FACTORS: Dict[int, float] = {0: 1.0}  # MCD registers: raw values

@@ -9,12 +9,12 @@ below.
 
 from typing import Dict
 
-from drive_bridge.devices import fc, lvsg, mcd, vlt
+from drive_bridge.devices import fc51, lvsg, mcd, vlt
 from drive_bridge.devices.contracts import Family
 
 FAMILIES: Dict[str, Family] = {entry.name: entry for entry in (
     mcd.ENTRY,
-    fc.ENTRY,
+    fc51.ENTRY,
     vlt.ENTRY,
     lvsg.ENTRY,
 )}

@@ -4,13 +4,14 @@ VLT 5000 and VLT 6000 HVAC with the Modbus RTU option card (family ``vlt``).
 Tables from the option card manual ``003_be38f660678fad2b.txt`` ("Memory Mapping",
 "Conversion Factor", "Message Translation Examples", "Exception Codes") and
 ``shared/research/protocols.md`` ("VLT 5000/6000 readouts"), each with its source. The
-process data, control and status words are the FC profile's (:mod:`drive_bridge.devices.drive`).
+process data, control and status words are the FC profile's
+(:mod:`drive_bridge.devices.fc_profile_drive`).
 """
 
 from typing import Dict, Optional
 
 from drive_bridge.devices.contracts import Family
-from drive_bridge.devices.drive import (
+from drive_bridge.devices.fc_profile_drive import (
     COMMS_TIMEOUT, CURRENT_PARAMETER, DriveFamilyData, make_drive_profile)
 from drive_bridge.devices.parameters import ParameterSpec, VLT_CONVERSION_FACTORS
 from drive_bridge.devices.vlt_parameters import VLT_PARAMETERS

@@ -43,7 +43,7 @@ from drive_bridge.sim.adapter import AdapterBehaviour, AdapterRelay, parse_devic
 from drive_bridge.sim.ap_ascii_server import ApAsciiSimServer
 from drive_bridge.sim.devices import make_device, SIM_MODELS
 from drive_bridge.sim.faults import FaultPlan, parse_fault_plan
-from drive_bridge.sim.fc_model import FcModel
+from drive_bridge.sim.fc_profile_model import FcProfileModel
 from drive_bridge.sim.fc_protocol_device import FcProtocolDevice
 from drive_bridge.sim.fc_protocol_server import FcProtocolSimServer
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
@@ -290,7 +290,7 @@ def _with_faults(server, args: argparse.Namespace):
 
 
 def _set_hand(device, on: bool) -> None:
-    if isinstance(_model(device), FcModel):  # over Modbus or the FC protocol
+    if isinstance(_model(device), FcProfileModel):  # over Modbus or the FC protocol
         _model(device).local_mode = on
     else:
         _model(device).hand_on = on
@@ -360,7 +360,7 @@ def _model(device):
 def _describe(unit: int, device, now: float) -> str:
     model = _model(device)
     model.advance(now)
-    if isinstance(model, FcModel):  # over Modbus or the FC protocol
+    if isinstance(model, FcProfileModel):  # over Modbus or the FC protocol
         return (f'{unit}: {model.config.model} output {model.output_pct:.1f} % current '
                 f'{model.motor_current_a():.2f} A control word 0x{model.control_word:04X} '
                 f'reference 0x{model.reference_word:04X} alarm word 0x{model.alarm_word:08X} '

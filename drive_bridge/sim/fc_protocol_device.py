@@ -1,8 +1,8 @@
 """
-The FC-protocol face of a simulated drive, onto the same :class:`FcModel` as the Modbus faces.
+The FC-protocol face of a simulated drive, onto the :class:`FcProfileModel` of the Modbus faces.
 
 So a VLT 5000/6000 or an FC 51 behaves the same whichever protocol talks to it. Every
-telegram's PCD1/PCD2 go to :meth:`FcModel.write_control` (the model obeys the control word
+telegram's PCD1/PCD2 go to :meth:`FcProfileModel.write_control` (the model obeys the control word
 only with bit 10, data valid, set, and counts any telegram as keeping the comms timeout
 alive: par. 8-03 is "the maximum time between two consecutive telegrams"); every reply
 carries the status word in PCD1 and the main actual value in PCD2 (confirmed, "Process
@@ -33,11 +33,11 @@ from collections import Counter, deque
 from typing import Deque, Optional, Tuple
 
 from drive_bridge.devices.parameters import DATA_TYPES, TEXT
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.fc_telegram import FcTelegram
 from drive_bridge.protocol.words import join_u32, registers_to_text, text_to_registers
-from drive_bridge.sim.fc_model import FcModel
-from drive_bridge.sim.fc_parameter_store import ParameterError
+from drive_bridge.sim.fc_profile_model import FcProfileModel
+from drive_bridge.sim.fc_profile_parameter_store import ParameterError
 
 MAX_TEXT_REGISTERS = 127
 
@@ -45,8 +45,8 @@ MAX_TEXT_REGISTERS = 127
 class FcProtocolDevice:
     """Answers FC-protocol telegrams like a drive with par. 500 / 8-30 = FC protocol."""
 
-    def __init__(self, model: FcModel,
-                 address_formats: Tuple[str, ...] = fc.ADDRESS_FORMATS):
+    def __init__(self, model: FcProfileModel,
+                 address_formats: Tuple[str, ...] = fc_telegram.ADDRESS_FORMATS):
         self.model = model
         self.address_formats = tuple(address_formats)
         # (control word, reference) of every telegram received, the latest 1000.
@@ -55,7 +55,7 @@ class FcProtocolDevice:
 
     def accepts(self, adr: int) -> bool:
         """Return whether this drive listens to telegrams in the format of ``adr``."""
-        return fc.decode_address(adr).address_format in self.address_formats
+        return fc_telegram.decode_address(adr).address_format in self.address_formats
 
     def handle(self, telegram: FcTelegram, now_s: float) -> FcTelegram:
         """Act on one telegram addressed to this drive (or broadcast) and return the reply."""
@@ -67,68 +67,69 @@ class FcProtocolDevice:
             try:
                 ak, pwe, text = self._parameter(telegram, now_s)
             except ParameterError as error:
-                ak, pwe, text = fc.AK_REPLY_ERROR, error.detail, None
+                ak, pwe, text = fc_telegram.AK_REPLY_ERROR, error.detail, None
         model.advance(now_s)
-        return fc.reply_to(telegram, model.status_word(), model.actual_word(), ak, pwe, text)
+        return fc_telegram.reply_to(telegram, model.status_word(), model.actual_word(), ak, pwe,
+                                    text)
 
     # -- parameter channel --------------------------------------------------------------
     def _parameter(self, telegram: FcTelegram, now_s: float) -> tuple:
         ak, pnu = telegram.ak, telegram.pnu
         self.model.index = telegram.ind
-        if ak == fc.AK_NONE:
-            return fc.AK_REPLY_NONE, 0, None
-        if ak == fc.AK_READ:
+        if ak == fc_telegram.AK_NONE:
+            return fc_telegram.AK_REPLY_NONE, 0, None
+        if ak == fc_telegram.AK_READ:
             return self._read(pnu, now_s)
-        if ak in fc.WRITE_AKS:
+        if ak in fc_telegram.WRITE_AKS:
             return self._write(telegram, now_s)
-        if ak == fc.AK_TEXT:
+        if ak == fc_telegram.AK_TEXT:
             return self._text(telegram, now_s)
-        raise ParameterError(fc.REQUEST_NOT_SUPPORTED)
+        raise ParameterError(fc_telegram.REQUEST_NOT_SUPPORTED)
 
     def _read(self, pnu: int, now_s: float) -> tuple:
         if self._is_text(pnu):
-            raise ParameterError(fc.WRONG_DATA_TYPE)
+            raise ParameterError(fc_telegram.WRONG_DATA_TYPE)
         count = self._registers(pnu)
         registers = self.model.read_parameter(pnu, count, now_s)
         if count == 2:
-            return fc.AK_REPLY_DOUBLE, join_u32(*registers), None
-        return fc.AK_REPLY_WORD, registers[0], None
+            return fc_telegram.AK_REPLY_DOUBLE, join_u32(*registers), None
+        return fc_telegram.AK_REPLY_WORD, registers[0], None
 
     def _write(self, telegram: FcTelegram, now_s: float) -> tuple:
-        pnu, double = telegram.pnu, telegram.ak in fc.DOUBLE_WORD_AKS
+        pnu, double = telegram.pnu, telegram.ak in fc_telegram.DOUBLE_WORD_AKS
         model = self.model
         if model.readout(pnu) is not None:
-            raise ParameterError(fc.NO_WRITE_ACCESS)
+            raise ParameterError(fc_telegram.NO_WRITE_ACCESS)
         if self._exists(pnu) and (self._is_text(pnu) or (self._registers(pnu) == 2) != double):
-            raise ParameterError(fc.WRONG_DATA_TYPE)
+            raise ParameterError(fc_telegram.WRONG_DATA_TYPE)
         registers = [telegram.pwe >> 16, telegram.pwe & 0xFFFF] if double \
             else [telegram.pwe & 0xFFFF]
         model.write_parameter(pnu, registers, now_s)
-        if telegram.ak in fc.EEPROM_AKS:
+        if telegram.ak in fc_telegram.EEPROM_AKS:
             self.eeprom_stores[pnu] += 1
         stored = int(model.parameters[pnu])
         if double:
-            return fc.AK_REPLY_DOUBLE, stored & 0xFFFFFFFF, None
-        return fc.AK_REPLY_WORD, stored & 0xFFFF, None
+            return fc_telegram.AK_REPLY_DOUBLE, stored & 0xFFFFFFFF, None
+        return fc_telegram.AK_REPLY_WORD, stored & 0xFFFF, None
 
     def _text(self, telegram: FcTelegram, now_s: float) -> tuple:
-        pnu, mode = telegram.pnu, telegram.ind & fc.TEXT_MODE_MASK
+        pnu, mode = telegram.pnu, telegram.ind & fc_telegram.TEXT_MODE_MASK
         model = self.model
-        if mode not in (fc.TEXT_READ_INDEX, fc.TEXT_WRITE_INDEX):
-            raise ParameterError(fc.NO_SUCH_INDEX)
+        if mode not in (fc_telegram.TEXT_READ_INDEX, fc_telegram.TEXT_WRITE_INDEX):
+            raise ParameterError(fc_telegram.NO_SUCH_INDEX)
         if not self._is_text(pnu):
-            raise ParameterError(fc.NO_SUCH_PARAMETER if not self._exists(pnu)
-                                 else fc.WRONG_DATA_TYPE)
-        if mode == fc.TEXT_WRITE_INDEX:
+            raise ParameterError(fc_telegram.NO_SUCH_PARAMETER if not self._exists(pnu)
+                                 else fc_telegram.WRONG_DATA_TYPE)
+        if mode == fc_telegram.TEXT_WRITE_INDEX:
             try:
                 value = telegram.text_value.decode('latin-1').rstrip('\x00')
                 registers = text_to_registers(value, len(value) + len(value) % 2)
             except ValueError:
-                raise ParameterError(fc.OUT_OF_LIMITS) from None
+                raise ParameterError(fc_telegram.OUT_OF_LIMITS) from None
             model.write_parameter(pnu, registers, now_s)
-            model.index = fc.TEXT_READ_INDEX | telegram.ind & 0xFF  # read it back
+            model.index = fc_telegram.TEXT_READ_INDEX | telegram.ind & 0xFF  # read it back
         registers = model.read_parameter(pnu, MAX_TEXT_REGISTERS, now_s)
-        return fc.AK_REPLY_TEXT, 0, registers_to_text(registers).encode('latin-1')
+        return fc_telegram.AK_REPLY_TEXT, 0, registers_to_text(registers).encode('latin-1')
 
     # -- parameter facts ----------------------------------------------------------------
     def _value(self, pnu: int) -> Optional[object]:

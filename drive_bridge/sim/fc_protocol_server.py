@@ -2,9 +2,9 @@
 A simulated RS-485 line of drives speaking the Danfoss FC protocol, on a pty or TCP.
 
 Several :class:`~drive_bridge.sim.fc_protocol_device.FcProtocolDevice` faces of
-:class:`~drive_bridge.sim.fc_model.FcModel` (FC 51, VLT 5000, VLT 6000) share one line, as
-a multidrop bus does: a telegram for an address nobody serves, a broadcast, or a telegram
-with a bad BCC gets no reply (confirmed: "only a slave that has received an error-free
+:class:`~drive_bridge.sim.fc_profile_model.FcProfileModel` (FC 51, VLT 5000, VLT 6000) share
+one line, as a multidrop bus does: a telegram for an address nobody serves, a broadcast, or a
+telegram with a bad BCC gets no reply (confirmed: "only a slave that has received an error-free
 telegram addressed to that slave can send a response telegram"; broadcasts are executed
 without a reply). TCP carries the same raw bytes (a transparent serial server).
 
@@ -38,10 +38,10 @@ from dataclasses import replace
 import time
 from typing import Callable, Dict, Optional, Tuple
 
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.fc_telegram import FcTelegram
 from drive_bridge.sim.faults import FaultInjector, LATE_FAULTS
-from drive_bridge.sim.fc_model import FcModel, FcSimConfig
+from drive_bridge.sim.fc_profile_model import FcProfileModel, FcProfileSimConfig
 from drive_bridge.sim.fc_protocol_device import FcProtocolDevice
 from drive_bridge.sim.line_server import Connection
 from drive_bridge.sim.modbus_server import ModbusSimServer
@@ -61,27 +61,27 @@ def mangle_fc_reply(kind: str, reply: bytes, injector: FaultInjector) -> Optiona
     if kind == 'truncated':
         return reply[:injector.random_int(1, len(reply) - 1)]
     if kind == 'wrong_address':
-        telegram = fc.decode(reply).telegram
+        telegram = fc_telegram.decode(reply).telegram
         return replace(telegram, adr=next_address_byte(telegram.adr)).encode()
     if kind == 'garbage':
         lge = _IMPOSSIBLE_LGES[injector.random_int(0, len(_IMPOSSIBLE_LGES) - 1)]
         noise = injector.random_bytes(injector.random_int(4, 12))
-        return bytes([fc.STX, lge]) + noise
+        return bytes([fc_telegram.STX, lge]) + noise
     return reply  # 'slow' and the late ones: timed by the server
 
 
 def next_address_byte(adr: int) -> int:
     """Return the ADR byte of the next address in the same format (wrapping around)."""
-    decoded = fc.decode_address(adr)
-    top = 31 if decoded.address_format == fc.ADDRESS_FORMAT_31 else 126
-    return fc.encode_address(decoded.address % top + 1, decoded.address_format)
+    decoded = fc_telegram.decode_address(adr)
+    top = 31 if decoded.address_format == fc_telegram.ADDRESS_FORMAT_31 else 126
+    return fc_telegram.encode_address(decoded.address % top + 1, decoded.address_format)
 
 
 class FcProtocolSimServer(ModbusSimServer):
     """Serve FC-protocol drives on one simulated line, on its own thread."""
 
     def __init__(self, devices: Dict[int, FcProtocolDevice], wire_baud: int = 0,
-                 wire_parity: str = fc.DEFAULT_PARITY,
+                 wire_parity: str = fc_telegram.DEFAULT_PARITY,
                  clock: Callable[[], float] = time.monotonic):
         super().__init__(devices, wire=None, clock=clock)
         self.faults = FaultInjector(FC_PROTOCOL_FAULTS)
@@ -98,7 +98,7 @@ class FcProtocolSimServer(ModbusSimServer):
     def take_bytes(self, connection: Connection, gap_elapsed: bool) -> None:
         """Answer the whole telegrams in ``connection``'s buffer (the line's StreamHandler)."""
         while connection.buffer:
-            result = fc.decode(connection.buffer)
+            result = fc_telegram.decode(connection.buffer)
             if result.telegram is None and not result.error:
                 if gap_elapsed:  # a partial telegram, then silence: drop it
                     connection.buffer = b''
@@ -110,7 +110,7 @@ class FcProtocolSimServer(ModbusSimServer):
             if result.telegram is None:
                 with self.lock:
                     self.stats.dropped += 1
-                    if result.error == fc.ERROR_BCC:
+                    if result.error == fc_telegram.ERROR_BCC:
                         self.stats.crc_errors += 1
                 continue
             self.line.release_held(connection)  # a telegram came: late_batched replies go
@@ -160,19 +160,19 @@ class FcProtocolSimServer(ModbusSimServer):
         """Write ``reply`` when it is due: at once, at wire time, or as ``fault`` says."""
         due = self.clock()
         if self.wire_baud:
-            characters = len(request) + fc.GAP_CHARACTERS + len(reply)
-            due = connection.first_byte_s + characters * fc.character_time_s(
+            characters = len(request) + fc_telegram.GAP_CHARACTERS + len(reply)
+            due = connection.first_byte_s + characters * fc_telegram.character_time_s(
                 self.wire_baud, self.wire_parity)
         self._send(connection, reply, fault, due)
 
 
 def make_fc_protocol_server(models: Dict[int, str], settings: Optional[dict] = None,
-                            address_formats: Tuple[str, ...] = fc.ADDRESS_FORMATS,
+                            address_formats: Tuple[str, ...] = fc_telegram.ADDRESS_FORMATS,
                             wire_baud: int = 0) -> FcProtocolSimServer:
     """
     Return a simulated FC-protocol line, one drive per address: ``{1: 'fc51', 2: 'vlt5000'}``.
 
-    ``settings`` are keyword settings of :class:`FcSimConfig` for every drive.
+    ``settings`` are keyword settings of :class:`FcProfileSimConfig` for every drive.
     """
     now = time.monotonic()
     devices = {}
@@ -180,7 +180,8 @@ def make_fc_protocol_server(models: Dict[int, str], settings: Optional[dict] = N
         if model not in FC_PROTOCOL_MODELS:
             raise ValueError(f'{model!r} does not speak the FC protocol here: allowed '
                              f'{", ".join(FC_PROTOCOL_MODELS)}')
-        config = FcSimConfig(model=model, address=address, protocol='fc_protocol',
-                             baudrate=wire_baud or fc.DEFAULT_BAUDRATE, **(settings or {}))
-        devices[address] = FcProtocolDevice(FcModel(config, now), address_formats)
+        config = FcProfileSimConfig(model=model, address=address, protocol='fc_protocol',
+                                    baudrate=wire_baud or fc_telegram.DEFAULT_BAUDRATE,
+                                    **(settings or {}))
+        devices[address] = FcProtocolDevice(FcProfileModel(config, now), address_formats)
     return FcProtocolSimServer(devices, wire_baud=wire_baud)

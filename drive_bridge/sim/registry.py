@@ -11,8 +11,8 @@ its Modbus face and an entry here: the family's name, the models it simulates an
 from dataclasses import dataclass
 from typing import Callable, Dict, Tuple
 
-from drive_bridge.devices import fc, mcd, vlt
-from drive_bridge.sim.fc_device import make_drive_device
+from drive_bridge.devices import fc51, mcd, vlt
+from drive_bridge.sim.fc_profile_modbus_device import make_drive_device
 from drive_bridge.sim.mcd_device import make_mcd_device
 from drive_bridge.sim.modbus_server import SimDevice
 
@@ -31,7 +31,7 @@ class Simulator:
 
 SIMULATORS: Dict[str, Simulator] = {entry.family: entry for entry in (
     Simulator(mcd.FAMILY, tuple(mcd.MODEL_FEATURES), make_mcd_device),
-    Simulator(fc.FAMILY, ('fc51',), make_drive_device, knows_its_line=True),
+    Simulator(fc51.FAMILY, ('fc51',), make_drive_device, knows_its_line=True),
     Simulator(vlt.FAMILY, vlt.MODELS, make_drive_device, knows_its_line=True),
 )}
 

@@ -31,7 +31,7 @@ import os
 import tempfile
 from typing import Any, Dict, List, Mapping, Optional
 
-from drive_bridge import config as cfg
+from drive_bridge.config.params_file import load_yaml_file
 from drive_bridge.devices.parameters import check_value, ParameterSpec, TEXT
 from drive_bridge.errors import ConfigError
 
@@ -124,7 +124,7 @@ def _umask() -> int:
 def load(path: str) -> Backup:
     """Return the backup in ``path``; raise BackupError in one line if it is not one."""
     try:
-        content = cfg.load_yaml_file(path, str(path))
+        content = load_yaml_file(path, str(path))
     except ConfigError as error:
         raise BackupError(str(error)) from None
     if not isinstance(content, dict) or 'parameters' not in content:

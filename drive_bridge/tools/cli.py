@@ -21,9 +21,11 @@ or file, 130 interrupted (Ctrl-C), 141 the reader of stdout went away (``| head`
 
 This module holds the parser, :func:`main` and :func:`run_command`. The commands are in
 ``cli_status`` (status, monitor), ``cli_parameter`` (get, set), ``cli_backup`` (backup,
-restore) and ``cli_scan``; what they share (:class:`Session` and the identification of a
-device) in ``cli_session``; the bus and the device from ``--config`` and options in
-``cli_target``.
+restore) and ``cli_scan``; what they share (:class:`Session`) in ``cli_session``, what
+answers at an address in ``cli_identify``; the bus and the device from ``--config`` and
+options in ``cli_target``. Parameter access and identification themselves are
+:mod:`drive_bridge.devices.parameter_service` and :mod:`drive_bridge.devices.identification`,
+which the node uses as well.
 """
 
 import argparse
@@ -33,7 +35,7 @@ import sys
 import textwrap
 from typing import List, Optional
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.console import drop_stdout, EXIT_BROKEN_PIPE, integer_argument, \
     number_argument, OneLineParser, parse_integer, parse_number
 from drive_bridge.errors import CommandRefused, ConfigError, DriveBridgeError, ModelMismatch

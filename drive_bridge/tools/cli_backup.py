@@ -27,13 +27,11 @@ EVERY_ENTRY = 'every entry: '  # a refusal of the whole file for one reason
 
 def backup_rows(session: Session) -> List[Tuple[int, Optional[ParameterSpec]]]:
     """Return (PNU, spec) of each parameter a backup covers, in order."""
-    profile = session.require_parameters()
-    session.resolve_model()  # model auto: the parameter numbers depend on the model
-    numbers = sorted(profile.parameter_numbers())
+    numbers = session.parameters.setting_numbers()
     if not numbers:
-        raise CliError(f'{session.name} ({session.device.family} {profile.model}) has no '
-                       'parameters to back up', EXIT_USAGE)
-    table = session.table()
+        raise CliError(f'{session.name} ({session.device.family} {session.profile.model}) has '
+                       'no parameters to back up', EXIT_USAGE)
+    table = session.parameters.table()
     return [(number, table.get(number)) for number in numbers]
 
 
@@ -42,7 +40,7 @@ def read_all(session: Session, numbers: List[int], label: str, args, out) -> Dic
     values = {}
     with Progress(len(numbers), label, args, out) as progress:
         for number in numbers:
-            values[number] = session.parameter(number)
+            values[number] = session.parameters.read(number)
             progress.step()
     return values
 
@@ -66,6 +64,7 @@ def command_backup(args, out) -> int:
     check_backup_file(args.file, args.force)
 
     def backup(session: Session) -> None:
+        parameters = session.parameters
         rows = backup_rows(session)
         numbers = [number for number, _ in rows]
         try:
@@ -77,10 +76,10 @@ def command_backup(args, out) -> int:
                    if not info.same_value(values[number], verify[number])]
         if changed:
             raise CliError(f'{len(changed)} parameters changed while backing up (first: '
-                           f'{session.label(changed[0])}): run the backup again with the '
+                           f'{parameters.label(changed[0])}): run the backup again with the '
                            'device stopped; nothing saved')
         for number, spec in rows:  # a value the table refuses: restore would refuse the file
-            reason = spec and backup_file.value_reason(spec, values[number], session.factors)
+            reason = spec and backup_file.value_reason(spec, values[number], parameters.factors)
             if reason:
                 warn(f'{reason}: the device holds it, but restore will refuse this file '
                      'until it is changed')
@@ -103,10 +102,10 @@ def command_backup(args, out) -> int:
 def backup_row(session: Session, number: int, spec: Optional[ParameterSpec],
                value: Any) -> Dict[str, Any]:
     """Return one parameter's entry of a backup file."""
-    return {'number': session.manual_number(number),
+    return {'number': session.parameters.manual_number(number),
             'pnu': number, 'name': spec.name if spec is not None else f'parameter {number}',
             'unit': spec.unit if spec is not None else '',
-            'value': info.display_value(spec, value, session.factors)}
+            'value': info.display_value(spec, value, session.parameters.factors)}
 
 
 def command_restore(args, out) -> int:
@@ -145,17 +144,18 @@ def refuse_restore(backup, name: str, reasons: List[str], total: int = 0) -> Non
 
 def restore_checked(session: Session, backup, args, out) -> None:
     """Restore ``backup`` to the session's device if every entry fits its model."""
-    profile = session.require_parameters()
+    parameters = session.parameters
+    profile = parameters.require()
     model = session.resolve_model()
     reasons = backup_file.kind_reasons(backup, session.device.family, model)
     if reasons:
         refuse_restore(backup, session.name, reasons)
-    reasons = backup_file.entry_reasons(backup, session.table(), session.factors,
-                                        session.manual_number)
+    reasons = backup_file.entry_reasons(backup, parameters.table(), parameters.factors,
+                                        parameters.manual_number)
     if reasons:
         refuse_restore(backup, session.name, reasons, len(backup.entries))
     values = {number: info.whole_number(value) for number, value in backup.values().items()}
-    line = serial_line_values(session.table(), values)
+    line = serial_line_values(parameters.table(), values)
     values = {number: value for number, value in values.items() if number not in line}
     options = ParameterOptions(eeprom=args.eeprom)
     reasons = unwritable(session, profile, backup, values, options)
@@ -175,15 +175,15 @@ def restore_checked(session: Session, backup, args, out) -> None:
     if different:
         number = different[0]
         raise CliError(f'verify failed for {len(different)} parameters (first: '
-                       f'{session.label(number)}: wrote {values[number]!r}, reads '
+                       f'{parameters.label(number)}: wrote {values[number]!r}, reads '
                        f'{verify[number]!r})')
     for number in line:
         if not info.same_value(line[number], held[number]):
-            warn(f'{session.label(number)}: the file has {line[number]!r}, {session.name} '
+            warn(f'{parameters.label(number)}: the file has {line[number]!r}, {session.name} '
                  f'holds {held[number]!r}: not written, as a setting of the serial line; '
                  'change it at the drive, then the bus settings')
-    kept = f'; {len(line)} serial line settings ({", ".join(map(session.manual_number, line))})' \
-        ' not written' if line else ''
+    kept = f'; {len(line)} serial line settings ' \
+        f'({", ".join(map(parameters.manual_number, line))}) not written' if line else ''
     print(f'{len(values)} parameters restored to {profile.model} {session.name} and verified'
           f'{kept}', file=out)
 
@@ -219,7 +219,7 @@ def unwritable(session: Session, profile: DeviceProfile, backup: backup_file.Bac
             refused[number] = str(error)
     if len(values) > 1 and len(refused) == len(values) and len(set(refused.values())) == 1:
         return [f'{EVERY_ENTRY}{next(iter(refused.values()))}']
-    return [f'{session.manual_number(number)} (entry {positions[number]}): {reason}'
+    return [f'{session.parameters.manual_number(number)} (entry {positions[number]}): {reason}'
             for number, reason in refused.items()]
 
 
@@ -231,7 +231,7 @@ def write_all(session: Session, values: Dict[int, Any], options: ParameterOption
     try:
         with Progress(len(numbers), 'writing', args, out) as progress:
             for number in numbers:
-                session.parameter(number, values[number], options)
+                session.parameters.transfer(number, values[number], options)
                 written += 1
                 progress.step()
     except KeyboardInterrupt:
@@ -248,10 +248,10 @@ def how_far(session: Session, numbers: List[int], written: int,
         done = f'none of the {total} parameters was written'
     else:
         done = f'{written} of {total} parameters were written (entries 1-{written}, ' \
-               f'{session.manual_number(numbers[0])} to ' \
-               f'{session.manual_number(numbers[written - 1])})'
+               f'{session.parameters.manual_number(numbers[0])} to ' \
+               f'{session.parameters.manual_number(numbers[written - 1])})'
     if written < total:
-        current = session.manual_number(numbers[written])
+        current = session.parameters.manual_number(numbers[written])
         doubt = ' (its write may or may not have reached the device)' if interrupted else ''
         done += f'; {current}{doubt} and the {total - written - 1} after it were not: ' \
                 f'{session.name} now holds a mix, restore the file again'

@@ -2,18 +2,19 @@
 ``drive-bridge scan``: what answers at each address of a range, with family and model.
 
 One port is opened for the whole scan; each address is asked with reads only
-(:func:`drive_bridge.tools.cli_session.identify`). When nothing answers, the first addresses
+(:func:`drive_bridge.tools.cli_identify.identify`). When nothing answers, the first addresses
 are searched at the other protocols, baud rates and parities (the doctor's search, short),
 a hint says what to do, and the exit status is 1.
 """
 
 from typing import Any, Dict, Tuple
 
-from drive_bridge import config as cfg
 from drive_bridge.bus.runner import TransactionRunner
+from drive_bridge.config import model as cfg
 from drive_bridge.console import parse_integer
 from drive_bridge.tools import doctor_search
-from drive_bridge.tools.cli_session import identify, open_runner, Progress, scan_families
+from drive_bridge.tools.cli_identify import identify, scan_families
+from drive_bridge.tools.cli_session import open_runner, Progress
 from drive_bridge.tools.cli_target import bus_values, CliError, EXIT_FAILED, EXIT_OK, \
     EXIT_USAGE, file_block
 from drive_bridge.transport.protocols import PROTOCOLS

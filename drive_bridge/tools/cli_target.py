@@ -3,16 +3,18 @@ What a ``drive-bridge`` command talks to: the bus and the device, from ``--confi
 
 The parameters file is checked as the node checks it (a name the node refuses, such as a
 misspelled ``baud_rate``, is refused here in the node's words:
-:func:`drive_bridge.config.check_parameters_block`); options win over the file. An option
-whose value does not fit is refused naming the option as it was typed (``--address 300:
-allowed 1-247 for fc``), never the setting it becomes inside.
+:func:`drive_bridge.config.node_parameters.check_parameters_block`); options win over the
+file. An option whose value does not fit is refused naming the option as it was typed
+(``--address 300: allowed 1-247 for fc``), never the setting it becomes inside.
 """
 
 import argparse
 import shlex
 from typing import Any, Dict, Iterable, Mapping, Tuple
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
+from drive_bridge.config.node_parameters import check_parameters_block, split_parameters
+from drive_bridge.config.params_file import select_block
 from drive_bridge.errors import ConfigError
 from drive_bridge.settings import check_value
 from drive_bridge.transport.protocols import PROTOCOLS
@@ -57,12 +59,12 @@ def file_block(args: argparse.Namespace) -> Tuple[Dict[str, Any], Dict[str, Dict
     """
     if not args.config:
         return {}, {}
-    block = cfg.select_block(args.config, args.node)
+    block = select_block(args.config, args.node)
     try:
-        cfg.check_parameters_block(block)
+        check_parameters_block(block)
     except ConfigError as error:
         raise ConfigError(f'{args.config}: {error} (the node refuses it too)') from None
-    return cfg.split_parameters(block)
+    return split_parameters(block)
 
 
 # -- the bus -------------------------------------------------------------------------------

@@ -16,11 +16,11 @@ import math
 import os
 from typing import Callable, Dict, List, Optional, Sequence
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.console import parse_integer
 from drive_bridge.tools import doctor_search as found
+from drive_bridge.tools.cli_identify import scan_families
 from drive_bridge.tools.cli_scan import parse_range
-from drive_bridge.tools.cli_session import scan_families
 from drive_bridge.tools.cli_target import bus_values, CliError, EXIT_USAGE, file_block
 from drive_bridge.tools.doctor_findings import exit_status, Finding, note, PROBLEM
 from drive_bridge.tools.doctor_line import check_line

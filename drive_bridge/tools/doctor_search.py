@@ -14,9 +14,11 @@ from contextlib import contextmanager
 import logging
 from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
+from drive_bridge.devices.identification import Answer
 from drive_bridge.errors import ConfigError
-from drive_bridge.tools.cli_session import Answer, identify, open_runner, scan_families
+from drive_bridge.tools.cli_identify import identify, scan_families
+from drive_bridge.tools.cli_session import open_runner
 from drive_bridge.tools.cli_target import CliError
 from drive_bridge.tools.doctor_findings import Finding, note, ok, problem
 from drive_bridge.transport.link import LinkSettings, port_framing

@@ -15,7 +15,7 @@ Failures are the typed errors of :mod:`drive_bridge.errors`: silence is ``NoResp
 reply cut short ``TruncatedFrame``, a bad BCC ``CrcError``, telegrams from other addresses
 only ``WrongAddress``, a telegram that does not answer the request ``MismatchedReply``, two
 of the address in one window ``AmbiguousReply``, anything else (bad STX, impossible LGE)
-``BadFrame``, and an AK 7 reply :class:`FcParameterError`, a ``DeviceException`` with the
+``BadFrame``, and an AK 7 reply :class:`FcProtocolParameterError`, a ``DeviceException`` with the
 drive's error code and the reply (its status word is valid). A broadcast (address 0) is
 sent without waiting: nobody answers it.
 """
@@ -23,7 +23,7 @@ sent without waiting: nobody answers it.
 from typing import Callable, Optional
 
 from drive_bridge.errors import BadFrame, ConfigError, DeviceException
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.fc_telegram import FcTelegram, FcTelegramRequest
 from drive_bridge.protocol.framing import Frame
 from drive_bridge.transport.line_transport import LineTransport
@@ -31,11 +31,11 @@ from drive_bridge.transport.link import LinkSettings
 import serial
 
 
-class FcParameterError(DeviceException):
+class FcProtocolParameterError(DeviceException):
     """An AK 7 reply: the drive could not perform the parameter command (code in PWElow)."""
 
     def __init__(self, code: int, reply: FcTelegram):
-        super().__init__(code, f'parameter {reply.pnu}: {fc.explain_error(code)}', reply)
+        super().__init__(code, f'parameter {reply.pnu}: {fc_telegram.explain_error(code)}', reply)
 
 
 def accept_telegram(request: FcTelegramRequest, sent: FcTelegram, received: Frame) -> FcTelegram:
@@ -46,8 +46,8 @@ def accept_telegram(request: FcTelegramRequest, sent: FcTelegram, received: Fram
     if received.raw[1] > request.max_reply_lge:
         raise BadFrame(f'reply with LGE {received.raw[1]} to a telegram whose reply has at '
                        f'most {request.max_reply_lge}')
-    reply = fc.decode(received.raw).telegram
-    problem = fc.reply_problem(request, reply)
+    reply = fc_telegram.decode(received.raw).telegram
+    problem = fc_telegram.reply_problem(request, reply)
     if problem:
         raise BadFrame(problem)
     return reply
@@ -56,16 +56,16 @@ def accept_telegram(request: FcTelegramRequest, sent: FcTelegram, received: Fram
 class FcProtocolTransport(LineTransport):
     """Run FC-protocol transactions on one line (8E1 by default); the bus owns it."""
 
-    framer = fc.ReplyFramer()
+    framer = fc_telegram.ReplyFramer()
     requests = (FcTelegramRequest,)
 
     def __init__(self, settings: LinkSettings,
-                 address_format: str = fc.DEFAULT_ADDRESS_FORMAT,
+                 address_format: str = fc_telegram.DEFAULT_ADDRESS_FORMAT,
                  open_port: Callable[..., object] = serial.serial_for_url,
                  **line_options):
-        if address_format not in fc.ADDRESS_FORMATS:
+        if address_format not in fc_telegram.ADDRESS_FORMATS:
             raise ConfigError(f'address_format {address_format!r}: allowed '
-                              f'{", ".join(fc.ADDRESS_FORMATS)}')
+                              f'{", ".join(fc_telegram.ADDRESS_FORMATS)}')
         super().__init__(settings, open_port, **line_options)
         self.address_format = address_format
 
@@ -80,5 +80,5 @@ class FcProtocolTransport(LineTransport):
             lambda received: len(received.raw) < 3 or received.raw[2] == telegram.adr,
             request.writes)
         if reply.is_error:
-            raise FcParameterError(reply.error_code, reply)
+            raise FcProtocolParameterError(reply.error_code, reply)
         return reply

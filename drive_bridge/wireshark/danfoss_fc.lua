@@ -4,7 +4,7 @@
 -- as exported PDUs naming "danfoss_fc"; the direction is frame.p2p_dir (0 = sent by the
 -- master, the bridge: a request; 1 = received: the drive's reply).
 --
--- Layout and bits as in drive_bridge/protocol/fc_telegram.py and fc_control.py:
+-- Layout and bits as in drive_bridge/protocol/fc_telegram.py and fc_profile.py:
 --   telegram  STX(02h) LGE ADR data BCC; LGE = the bytes after LGE (VLT 5000 / FC 300 Design
 --             Guides "Telegram Structure"); LGE 6 process block (PCD1 PCD2), 14 parameter block
 --             (PKE IND PWEhigh PWElow PCD1 PCD2), 10 + n text block (manual 003 "Text Blocks")

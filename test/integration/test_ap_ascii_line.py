@@ -3,7 +3,7 @@
 import time
 
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config
+from drive_bridge.config.model import build_config
 from drive_bridge.errors import BadFrame, CommandRefused, DeviceException, NoResponse
 from drive_bridge.protocol.requests import AsciiCommand, AsciiRequest
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server

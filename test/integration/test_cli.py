@@ -742,7 +742,7 @@ def test_help_everywhere(capsys, command):
 
 def test_the_node_prints_usage_for_help():
     pytest.importorskip('rclpy')
-    done = subprocess.run([sys.executable, '-m', 'drive_bridge.ros.entry', '--help'],
+    done = subprocess.run([sys.executable, '-m', 'drive_bridge.ros.node.entry', '--help'],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and done.stdout.startswith('usage: drive_bridge_node')
     assert 'error' not in done.stderr.lower()

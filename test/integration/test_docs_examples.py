@@ -128,7 +128,7 @@ def test_every_recording_example_parses_with_its_command(block, command):
         parser = plot_parser()
     else:
         assert argv[0] == 'drive_bridge_record'
-        record = pytest.importorskip('drive_bridge.ros.record')  # rclpy: not in every venv
+        record = pytest.importorskip('drive_bridge.ros.record.cli')  # rclpy: not in every venv
         parser = record.build_parser()
     parser.exit_on_error = False
     parser.parse_args(argv[1:])

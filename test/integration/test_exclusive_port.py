@@ -1,6 +1,6 @@
 """Serial ports are opened exclusively: a second opener gets one line naming the owner."""
 
-from drive_bridge import config as cfg
+from drive_bridge.config import model as cfg
 from drive_bridge.errors import LinkDown
 from drive_bridge.protocol.requests import ReadCoils
 from drive_bridge.sim.devices import make_sim_server

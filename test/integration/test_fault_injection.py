@@ -2,7 +2,7 @@
 
 
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config
+from drive_bridge.config.model import build_config
 from drive_bridge.errors import CrcError, TruncatedFrame
 from drive_bridge.protocol import rtu
 from drive_bridge.protocol.requests import ReadRegisters

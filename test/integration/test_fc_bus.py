@@ -1,8 +1,8 @@
 """pymodbus (pinned and 3.6.9) and the bus against the simulated FC 51: coils, registers, text."""
 
 from drive_bridge.bus.master import BusMaster, BusTiming
-from drive_bridge.config import build_config
-from drive_bridge.devices import fc
+from drive_bridge.config.model import build_config
+from drive_bridge.devices import fc51
 from drive_bridge.devices.contracts import ParameterOptions
 from drive_bridge.errors import CommandRefused, DeviceException
 from drive_bridge.protocol import words
@@ -47,9 +47,9 @@ def test_process_data_as_coils(transport, sim):
 
 
 def test_registers_text_and_eeprom_coil(transport, sim):
-    registers = transport.execute(1, ReadRegisters(fc.DATA.spec(1540).address, 10, exact=False))
+    registers = transport.execute(1, ReadRegisters(fc51.DATA.spec(1540).address, 10, exact=False))
     assert words.registers_to_text(registers) == 'FC-051PK75T4E20H3BXC'
-    version = transport.execute(1, ReadRegisters(fc.DATA.spec(1543).address, 10, exact=False))
+    version = transport.execute(1, ReadRegisters(fc51.DATA.spec(1543).address, 10, exact=False))
     assert version == words.text_to_registers('2.70', 4)  # a short text: a truncated reply
     assert transport.execute(1, WriteCoil(64, True)) is None
     assert sim.devices[1].model.eeprom_writes is True
@@ -61,7 +61,7 @@ def test_registers_text_and_eeprom_coil(transport, sim):
 
 def test_exception_04_then_register_7(transport):
     with pytest.raises(DeviceException) as error:
-        transport.execute(1, WriteRegister(fc.DATA.spec(1614).address, 5))
+        transport.execute(1, WriteRegister(fc51.DATA.spec(1614).address, 5))
     assert error.value.code == 4
     assert transport.execute(1, ReadRegisters(6, 1)) == [1]  # no write access
 

@@ -1,10 +1,10 @@
 """The bus over the Danfoss FC protocol: drives on a pty against the FC-protocol simulator."""
 
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config
+from drive_bridge.config.model import build_config
 from drive_bridge.devices.contracts import ParameterOptions
 from drive_bridge.errors import CommandRefused
-from drive_bridge.protocol.fc_control import RAMP_STOP_WORD, START_WORD
+from drive_bridge.protocol.fc_profile import RAMP_STOP_WORD, START_WORD
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from integration_helpers import wait_until
 import pytest

@@ -13,7 +13,7 @@ refused fails the test.
 from typing import Dict, List, Sequence
 
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config
+from drive_bridge.config.model import build_config
 from drive_bridge.errors import CommandRefused, DeviceException
 from drive_bridge.protocol.requests import ReadRegisters, WriteRegister
 from drive_bridge.sim.devices import make_sim_server

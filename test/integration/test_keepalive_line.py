@@ -11,7 +11,7 @@ view, must never be further apart than the rule's gap, and the drive must not tr
 from typing import Optional
 
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config, keepalive_gaps
+from drive_bridge.config.model import build_config, keepalive_gaps
 from drive_bridge.sim.devices import make_device
 from drive_bridge.sim.faults import FaultPlan
 import pytest

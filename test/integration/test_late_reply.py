@@ -16,7 +16,7 @@ from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import AmbiguousReply, BadFrame, NoResponse, TransportError
 from drive_bridge.protocol import ap_ascii, rtu
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.requests import AsciiCommand, ReadRegisters, WriteRegister
 from drive_bridge.sim.faults import FaultPlan
 from drive_bridge.sim.mcd_device import make_mcd_server
@@ -215,8 +215,8 @@ def test_a_start_whose_ack_came_late_leaves_the_stop_to_its_own_ack():
 
 
 # -- FC protocol: process data echoes nothing -------------------------------------------------
-def fc_answer(telegram: fc.FcTelegram) -> bytes:
-    return fc.reply_to(telegram, 0x0607, telegram.pcd2).encode()  # MAV = the reference
+def fc_answer(telegram: fc_telegram.FcTelegram) -> bytes:
+    return fc_telegram.reply_to(telegram, 0x0607, telegram.pcd2).encode()  # MAV = the reference
 
 
 def test_late_fc_process_data_is_never_taken():
@@ -226,9 +226,9 @@ def test_late_fc_process_data_is_never_taken():
             return []
         return [(0.01, fc_answer(telegram))]
     with scripted(script, fc_requests, protocol='fc_protocol') as (transport, line):
-        assert isinstance(outcome(transport, 1, fc.process_request(0x047C, 0x1111)),
+        assert isinstance(outcome(transport, 1, fc_telegram.process_request(0x047C, 0x1111)),
                           NoResponse)
-        result = outcome(transport, 1, fc.process_request(0x047C, 0x2222))
+        result = outcome(transport, 1, fc_telegram.process_request(0x047C, 0x2222))
     assert isinstance(result, AmbiguousReply), result
 
 
@@ -237,10 +237,10 @@ def test_a_late_fc_reply_in_the_guard_is_discarded_and_the_next_answer_is_its_ow
         delay_s = TIMEOUT_S + 0.02 if index == 0 else 0.01
         return [(delay_s, fc_answer(telegram))]
     with scripted(script, fc_requests, protocol='fc_protocol') as (transport, line):
-        assert isinstance(outcome(transport, 1, fc.process_request(0x047C, 0x1111)),
+        assert isinstance(outcome(transport, 1, fc_telegram.process_request(0x047C, 0x1111)),
                           NoResponse)
         assert late_units(transport) == [1]
-        assert transport.execute(1, fc.process_request(0x047C, 0x2222)).pcd2 == 0x2222
+        assert transport.execute(1, fc_telegram.process_request(0x047C, 0x2222)).pcd2 == 0x2222
 
 
 # -- the bus against the simulator's late replies ---------------------------------------------

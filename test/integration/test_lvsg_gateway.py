@@ -1,7 +1,7 @@
 """The bus against the simulated Profibus gateway over Modbus TCP and RTU over TCP."""
 
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config
+from drive_bridge.config.model import build_config
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway
 from drive_bridge.sim.mcd_model import READY, RUNNING, TRIPPED
 from integration_helpers import wait_until

@@ -14,7 +14,7 @@ import time
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.devices.mcd import McdProfile
 from drive_bridge.errors import TransportError
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.requests import AsciiRequest, ReadRegisters
 from drive_bridge.sim.mcd_device import make_mcd_server
 from drive_bridge.sim.pty_link import PtyLink
@@ -38,7 +38,7 @@ def transport_and_request(kind: str, port: str, connect: bool = True):
     if kind == 'fc_protocol':
         link = LinkSettings(protocol='modbus_rtu', port=port, parity='N', timeout_s=TIMEOUT_S)
         transport = FcProtocolTransport(link)
-        request = fc.read_parameter_request(1614)
+        request = fc_telegram.read_parameter_request(1614)
     elif kind == 'ap_ascii':
         link = LinkSettings(protocol='ap_ascii', port=port, timeout_s=TIMEOUT_S)
         transport = make_transport(link)

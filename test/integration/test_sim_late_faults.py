@@ -22,9 +22,9 @@ import time
 from typing import List, Optional
 
 from drive_bridge.protocol import ap_ascii, rtu
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.crc import crc_ok
-from drive_bridge.protocol.fc_control import START_WORD
+from drive_bridge.protocol.fc_profile import START_WORD
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.sim import cli as sim_cli
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
@@ -97,14 +97,14 @@ class MbapCodec:
 class FcCodec:
     """FC protocol telegrams: STX LGE ADR ... BCC."""
 
-    def request(self, telegram: fc.FcTelegram) -> bytes:
+    def request(self, telegram: fc_telegram.FcTelegram) -> bytes:
         return telegram.encode()
 
     def length(self, buffer: bytes) -> Optional[int]:
         return buffer[1] + 2 if len(buffer) >= 2 else None
 
     def reply(self, data: bytes, at_s: float) -> Reply:
-        result = fc.decode(data)
+        result = fc_telegram.decode(data)
         assert result.telegram is not None, (result, data.hex(' '))
         return Reply(result.telegram.address.address, data[1], None, data, at_s)
 
@@ -412,12 +412,12 @@ def fc_line(request):
     server.stop()
 
 
-def fc_start(address: int) -> fc.FcTelegram:
-    return fc.process_request(START_WORD, HALF_SPEED).telegram(address)
+def fc_start(address: int) -> fc_telegram.FcTelegram:
+    return fc_telegram.process_request(START_WORD, HALF_SPEED).telegram(address)
 
 
-def fc_read(address: int) -> fc.FcTelegram:
-    return fc.read_parameter_request(1).telegram(address)
+def fc_read(address: int) -> fc_telegram.FcTelegram:
+    return fc_telegram.read_parameter_request(1).telegram(address)
 
 
 def control_word(server, address: int) -> int:
@@ -435,7 +435,8 @@ def test_a_late_fc_reply_comes_after_the_timeout_and_the_line_is_served_meanwhil
     assert control_word(server, FC51) == START_WORD  # taken, not yet answered
     replies += master.replies(1)
     assert [(reply.unit, reply.kind) for reply in replies] == [
-        (VLT5000, fc.LGE_PARAMETER), (FC51, fc.LGE_PARAMETER), (FC51, fc.LGE_PROCESS)]
+        (VLT5000, fc_telegram.LGE_PARAMETER), (FC51, fc_telegram.LGE_PARAMETER),
+        (FC51, fc_telegram.LGE_PROCESS)]
     late = replies[2].at_s - sent_s
     assert late_by_s() <= late < late_by_s() + READ_TIMEOUT_S / 2, late
     assert server.faults.totals() == {'late': 1}
@@ -450,7 +451,7 @@ def test_a_late_batched_fc_reply_comes_just_before_the_next_reply(fc_line):
     next_sent_s = master.send(fc_read(VLT5000))
     replies = master.replies(2)
     assert [(reply.unit, reply.kind) for reply in replies] == [
-        (FC51, fc.LGE_PROCESS), (VLT5000, fc.LGE_PARAMETER)]
+        (FC51, fc_telegram.LGE_PROCESS), (VLT5000, fc_telegram.LGE_PARAMETER)]
     assert replies[0].at_s >= next_sent_s
     assert server.faults.totals() == {'late_batched': 1}
 

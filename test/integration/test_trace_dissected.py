@@ -11,8 +11,8 @@ devices' models hold, not bytes; skipped without tshark.
 import io
 
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config
-from drive_bridge.protocol.fc_control import RAMP_STOP_WORD, START_WORD
+from drive_bridge.config.model import build_config
+from drive_bridge.protocol.fc_profile import RAMP_STOP_WORD, START_WORD
 from drive_bridge.sim.ap_ascii_server import make_ap_ascii_server
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from drive_bridge.sim.lvsg_gateway import make_lvsg_gateway

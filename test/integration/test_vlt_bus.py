@@ -1,7 +1,7 @@
 """The native RTU engine and the bus against the simulated VLT 5000/6000 option card."""
 
 from drive_bridge.bus.master import BusMaster, BusTiming
-from drive_bridge.config import build_config
+from drive_bridge.config.model import build_config
 from drive_bridge.errors import CommandRefused, DeviceException
 from drive_bridge.protocol.requests import ReadRegisters
 from drive_bridge.sim.devices import make_sim_server

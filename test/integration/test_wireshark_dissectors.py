@@ -12,10 +12,10 @@ import random
 import struct
 import subprocess
 
-from drive_bridge.protocol import ap_ascii, fc_control, lvsg, pcapng
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import ap_ascii, fc_profile, lvsg, pcapng
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.crc import append_crc
-from drive_bridge.protocol.fc_scaling import percent_to_word
+from drive_bridge.protocol.fc_profile_scaling import percent_to_word
 from drive_bridge.protocol.words import bytes_to_registers
 from drive_bridge.tools import cli
 from drive_bridge.tools.cli_wireshark import dissector_files
@@ -61,10 +61,11 @@ def test_every_shipped_dissector_loads_without_error_and_registers_its_name(tmp_
 def fc_frames():
     """Return (inbound, bytes) of the manuals' worked telegrams and the codec's."""
     text_body = bytes.fromhex('02 11 01 F0 01 00 01') + b'ENGLISH' + bytes(4)
-    quick_stop = fc_control.COMMAND_WORDS[fc_control.Command.QUICK_STOP]
-    request = fc.FcTelegram(fc.encode_address(5), quick_stop, percent_to_word(-25.0),
-                            fc.make_pke(fc.AK_WRITE_WORD, 1614), 2, 300)
-    bad_bcc = bytearray(fc.FcTelegram(fc.encode_address(5), 0x0E07, 0).encode())
+    quick_stop = fc_profile.COMMAND_WORDS[fc_profile.Command.QUICK_STOP]
+    request = fc_telegram.FcTelegram(fc_telegram.encode_address(5), quick_stop,
+                                     percent_to_word(-25.0),
+                                     fc_telegram.make_pke(fc_telegram.AK_WRITE_WORD, 1614), 2, 300)
+    bad_bcc = bytearray(fc_telegram.FcTelegram(fc_telegram.encode_address(5), 0x0E07, 0).encode())
     bad_bcc[-1] ^= 0x01
     return [
         # VLT 5000 Design Guide MG.52.B2.02: start at 50 % (ADR 4, format 1-31) and its reply
@@ -74,14 +75,16 @@ def fc_frames():
         (SENT, bytes.fromhex('02 0E 01 12 08 00 00 00 00 00 00 00 00 00 00 17')),
         (RECEIVED, bytes.fromhex('02 0E 01 22 08 00 00 00 00 02 0C 06 07 00 00 28')),
         # "Additional Text": a text reply (AK 15, PNU 1, IND 1) "ENGLISH"
-        (RECEIVED, text_body + bytes([fc.bcc(text_body)])),
+        (RECEIVED, text_body + bytes([fc_telegram.bcc(text_body)])),
         # the codec: a quick stop at -25 % writing 300 to 16-14 (format 1-126), an AK 7 reply
         (SENT, request.encode()),
-        (RECEIVED, fc.error_reply(request, fc.NOT_WHILE_RUNNING, 0x0F0F, 0).encode()),
+        (RECEIVED, fc_telegram.error_reply(request, fc_telegram.NOT_WHILE_RUNNING, 0x0F0F,
+                                           0).encode()),
         # a broadcast start, a running drive on reference with a warning, a tripped drive
-        (SENT, fc.FcTelegram(fc.encode_address(0), fc_control.START_WORD,
-                             percent_to_word(100.0)).encode()),
-        (RECEIVED, fc.FcTelegram(fc.encode_address(5), 0x0F87, percent_to_word(75.0)).encode()),
+        (SENT, fc_telegram.FcTelegram(fc_telegram.encode_address(0), fc_profile.START_WORD,
+                                      percent_to_word(100.0)).encode()),
+        (RECEIVED, fc_telegram.FcTelegram(fc_telegram.encode_address(5), 0x0F87,
+                                          percent_to_word(75.0)).encode()),
         (RECEIVED, bytes(bad_bcc)),  # 10: bad BCC
         (SENT, b'\x03\x06\x04'),  # 11: unknown start byte
         (SENT, bytes.fromhex('02 07 04 04 7C 20 00 58')),  # 12: LGE 7
@@ -437,7 +440,8 @@ def modbus_garbage(rng, count=300):
 
 
 @pytest.mark.parametrize('dissector, frames, options', [
-    ('danfoss_fc', lambda rng: garbage(rng, [fc.STX, fc.STX, 0x06, 0x0E, 0x11]), ()),
+    ('danfoss_fc', lambda rng: garbage(rng, [fc_telegram.STX, fc_telegram.STX, 0x06, 0x0E, 0x11]),
+     ()),
     ('danfoss_ap_ascii', lambda rng: garbage(rng, [2, 4, 6, 0x15, 7]), ()),
     ('danfoss_lvsg', modbus_garbage, ('-o', f'danfoss_lvsg.slaves:{SLAVES}, 2:0:1')),
 ])

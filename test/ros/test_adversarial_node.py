@@ -296,7 +296,7 @@ def descriptor_type(node, name):
 
 
 def ctl(*args):
-    return subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl', *args],
+    return subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', *args],
                           capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
 
 

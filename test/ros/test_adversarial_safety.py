@@ -818,7 +818,7 @@ def trip_refused_reset_and_lifecycle(session, rig, trip_code: int) -> None:
 
 def ctl(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess:
     """Run drive_bridge_ctl to its end, as a user does, for the node /drive_bridge."""
-    return subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl', *args],
+    return subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', *args],
                           capture_output=True, text=True, timeout=timeout_s,
                           stdin=subprocess.DEVNULL)
 
@@ -834,7 +834,7 @@ def test_monitor_only_drive_gets_nothing_from_the_cli(tmp_path):
         outcomes.append(ctl('reference', rig.name, '30'))
         outcomes.append(ctl('param', 'set', f'{rig.name}.speed_reference', '40'))
         stream = subprocess.Popen(
-            [sys.executable, '-m', 'drive_bridge.ros.ctl', 'reference', rig.name, '30',
+            [sys.executable, '-m', 'drive_bridge.ros.ctl.cli', 'reference', rig.name, '30',
              '--rate', '50'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         assert more_frames(rig, 20)  # the stream goes on meanwhile

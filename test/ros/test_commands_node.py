@@ -8,7 +8,7 @@ node itself resolves: the contract's names, with the namespace, a renamed node a
 
 from contextlib import contextmanager
 
-from drive_bridge.config import write_params_file
+from drive_bridge.config.params_file import write_params_file
 from drive_bridge.sim.devices import make_sim_server
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy

@@ -1,5 +1,5 @@
 """
-The commands thread (:mod:`drive_bridge.ros.commands_thread`): what its ``stop`` promises.
+The commands thread (:mod:`drive_bridge.ros.node.commands_thread`): what its ``stop`` promises.
 
 The node ends the thread before it closes the bus; a True return must mean that no command
 callback runs or will run, and a callback that is still running must be waited for again by
@@ -15,7 +15,7 @@ import pytest
 import rclpy
 from std_msgs.msg import Float32
 
-commands_thread = pytest.importorskip('drive_bridge.ros.commands_thread')
+commands_thread = pytest.importorskip('drive_bridge.ros.node.commands_thread')
 
 TOPIC = f'/test_commands_thread_{os.getpid()}'
 

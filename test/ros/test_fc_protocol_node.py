@@ -3,7 +3,7 @@
 import signal
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from drive_bridge.protocol.fc_control import RAMP_STOP_WORD, START_WORD
+from drive_bridge.protocol.fc_profile import RAMP_STOP_WORD, START_WORD
 from drive_bridge.sim.fc_protocol_server import make_fc_protocol_server
 from ros_helpers import running_node, serving
 

@@ -13,7 +13,7 @@ import os
 import time
 
 from docs_helpers import parameter_reference
-from drive_bridge import config
+from drive_bridge.config.node_parameters import ROS_PARAMETERS
 from rcl_interfaces.srv import ListParameters
 import rclpy
 from ros_helpers import node_output, start_node, stop_node, write_params
@@ -59,7 +59,7 @@ def test_the_reference_lists_exactly_the_parameters_the_node_declares(tmp_path):
     declared = {'bus': set(), 'device': set()}
     for protocol, devices in NODES.items():
         names = declared_parameters(protocol, devices, tmp_path)
-        for name in names - set(config.ROS_PARAMETERS):
+        for name in names - set(ROS_PARAMETERS):
             device, _, setting = name.partition('.')
             if setting:
                 assert device in devices, name

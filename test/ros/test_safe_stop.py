@@ -8,7 +8,7 @@ import signal
 import time
 
 from drive_bridge.sim.devices import make_sim_server
-from drive_bridge.sim.fc_model import TIMEOUT_STOP
+from drive_bridge.sim.fc_profile_model import TIMEOUT_STOP
 import pytest
 from ros_helpers import RosClient, start_node, stop_node, write_params
 

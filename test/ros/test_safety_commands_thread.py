@@ -2,7 +2,7 @@
 The commands thread against stops, deactivate, SIGTERM, monitor-only and the deadman.
 
 ``~/joint_commands`` and ``<name>/speed_reference`` are taken on a thread of their own (the
-commands node, :mod:`drive_bridge.ros.command_inputs`), so a command can arrive while a stop,
+commands node, :mod:`drive_bridge.ros.node.command_inputs`), so a command can arrive while a stop,
 a deactivation or the exit signal's stops run on another thread. Here a stream of commands
 (several hundred a second, from a thread of the test process) runs through each of those;
 the motor is read from the simulated FC 51, never from the bridge: what it received (control

@@ -18,7 +18,7 @@ depend on the machine's load: the same seed gives the same run.
 from dataclasses import dataclass, replace
 from typing import Callable, Dict, List, Optional, Tuple
 
-from drive_bridge.protocol import fc_control as ctw, rtu
+from drive_bridge.protocol import fc_profile as ctw, rtu
 from drive_bridge.protocol.lvsg import Control
 from drive_bridge.protocol.rtu import RtuFrame
 from drive_bridge.sim.faults import mangle_rtu_reply, MODBUS_FAULTS

@@ -51,7 +51,7 @@ import time
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 from drive_bridge.errors import CommandRefused
-from drive_bridge.protocol import fc_scaling
+from drive_bridge.protocol import fc_profile_scaling
 from soak_harness.line import WireFrame
 
 ACKNOWLEDGED = 'acknowledged'
@@ -118,8 +118,8 @@ def outcome_of_reply(success: bool, message: str) -> str:
 
 def reference_valid(percent: float) -> bool:
     """Return whether ``percent`` is a reference a drive may get: finite, in [-200, 200)."""
-    return math.isfinite(percent) and fc_scaling.MIN_PERCENT <= percent < \
-        fc_scaling.MAX_PERCENT
+    return math.isfinite(percent) and fc_profile_scaling.MIN_PERCENT <= percent < \
+        fc_profile_scaling.MAX_PERCENT
 
 
 def as_float32(value: float) -> float:
@@ -648,7 +648,7 @@ class Oracle:
     # -- invariant 4: references ---------------------------------------------------------
     def _references(self, device: DeviceInfo) -> List[Violation]:
         violations = []
-        words = {fc_scaling.percent_to_word(device.reference_pct): 'the configured'}
+        words = {fc_profile_scaling.percent_to_word(device.reference_pct): 'the configured'}
         current = next(iter(words))
         items = [(frame.seq, 0, frame.seq, frame) for frame in self._by_unit[device.unit]
                  if frame.executed and frame.control is not None and
@@ -664,7 +664,7 @@ class Oracle:
                         f'{self._who(device)}: the bridge took the reference {item.percent} % '
                         f'at {self._at(item.time_s, item.seq)}; allowed [-200, 200)'))
                 if valid and item.accepted is not False:
-                    current = fc_scaling.percent_to_word(item.percent)
+                    current = fc_profile_scaling.percent_to_word(item.percent)
                     words.setdefault(current, f'{item.percent:g} %')
                 continue
             word = item.control.reference

@@ -33,12 +33,12 @@ from drive_bridge.bus.events import (
     BusEvent, DeviceOffline, DeviceOnline, handler_table, ignore, Notice, ReadingEvent,
     StateUnknown)
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import BridgeConfig, build_config, keepalive_gaps
+from drive_bridge.config.model import BridgeConfig, build_config, keepalive_gaps
 from drive_bridge.errors import CommandRefused
-from drive_bridge.protocol import fc_control
+from drive_bridge.protocol import fc_profile
 from drive_bridge.sim.devices import make_device
 from drive_bridge.sim.faults import FaultPlan, MODBUS_FAULTS
-from drive_bridge.sim.fc_model import ALARM_OVER_CURRENT, TIMEOUT_STOP
+from drive_bridge.sim.fc_profile_model import ALARM_OVER_CURRENT, TIMEOUT_STOP
 from drive_bridge.sim.lvsg_gateway import LvsgGatewaySim, LvsgSlave
 from drive_bridge.sim.mcd_model import McdModel, McdSimConfig, RUNNING, STARTING
 from drive_bridge.transport.serial_rtu import RtuSerialTransport
@@ -296,7 +296,7 @@ def running_motors(server: RecordingServer, devices: Tuple[LineDevice, ...] = LI
             elif device.kind == 'drive':
                 word = sim.model.control_word
                 states[device.name] = f'control word 0x{word:04X} (run)' \
-                    if fc_control.is_start(word) and not sim.model.tripped else ''
+                    if fc_profile.is_start(word) and not sim.model.tripped else ''
             else:
                 slave = sim.slaves[0]
                 running = slave.control.fwd_run or slave.model.state in (STARTING, RUNNING)

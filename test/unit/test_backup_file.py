@@ -1,14 +1,14 @@
 """The backup file of drive-bridge: written, read back, and checked against a model's table."""
 
-from drive_bridge.devices import fc, mcd, vlt
+from drive_bridge.devices import fc51, mcd, vlt
 from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import ParameterOptions
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
 from drive_bridge.devices.parameters import FC_CONVERSION_FACTORS
 from drive_bridge.tools import backup_file
 import pytest
 
-FC51 = fc.DATA.table('fc51')
+FC51 = fc51.DATA.table('fc51')
 
 
 def written(tmp_path, rows, **identity):
@@ -26,7 +26,7 @@ def row(pnu, value, **fields):
 
 
 def reasons(backup):
-    return backup_file.entry_reasons(backup, FC51, FC_CONVERSION_FACTORS, fc.parameter_label)
+    return backup_file.entry_reasons(backup, FC51, FC_CONVERSION_FACTORS, fc51.parameter_label)
 
 
 def test_a_written_backup_reads_back_whole(tmp_path):
@@ -74,7 +74,7 @@ def test_kind_and_identity():
 
 
 def test_parameter_info_of_a_drive_and_a_starter():
-    drive = DriveProfile(fc.DATA, 'fc51')
+    drive = FcProfileModbusDrive(fc51.DATA, 'fc51')
     assert info.label(drive, 1614) == '16-14'
     ramp = info.spec_for(drive, 341, ParameterOptions())
     assert info.format_value(ramp, 425 * 0.01, FC_CONVERSION_FACTORS) == '4.25 s'

@@ -2,8 +2,8 @@
 
 from drive_bridge.bus.master import BusMaster, BusTiming, DeviceSpec
 from drive_bridge.bus.motor import Motion
-from drive_bridge.devices import fc
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices import fc51
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
 from drive_bridge.errors import CommandRefused, DeviceException, NoResponse
 from drive_bridge.protocol import words
 from drive_bridge.protocol.requests import ReadCoils, ReadRegisters, WriteCoils, WriteRegisters
@@ -61,7 +61,7 @@ class FakeDrive(Transport):
 def make_bus(timeout_s=0.0, **profile_options):
     clock = FakeClock()
     drive = FakeDrive(clock)
-    profile = DriveProfile(fc.DATA, 'fc51', **profile_options)
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51', **profile_options)
     spec = DeviceSpec('conv', 1, profile, poll_rate_hz=10.0, reference_timeout_s=timeout_s)
     events = []
     bus = BusMaster(drive, [spec], BusTiming(retries=0, offline_after=2,
@@ -194,7 +194,7 @@ def test_setup_writes_when_the_drive_comes_online():
 def test_exception_04_reads_register_7_for_the_detail():
     bus, drive, clock, _ = make_bus()
     run_for(bus, clock, 0.3)
-    drive.refuse[fc.DATA.spec(124).address] = 4
+    drive.refuse[fc51.DATA.spec(124).address] = 4
     future = bus.write_parameter('conv', 124, 2.5)
     run_for(bus, clock, 0.1)
     with pytest.raises(CommandRefused) as error:
@@ -247,7 +247,7 @@ def bus_losing_one_reply():
     """Return (bus, drive, clock) with a drive whose next write's reply can be lost."""
     clock = FakeClock()
     drive = LosesOneReply(clock)
-    spec = DeviceSpec('conv', 1, DriveProfile(fc.DATA, 'fc51'), poll_rate_hz=10.0)
+    spec = DeviceSpec('conv', 1, FcProfileModbusDrive(fc51.DATA, 'fc51'), poll_rate_hz=10.0)
     bus = BusMaster(drive, [spec], BusTiming(retries=0), clock=clock, sleep=clock.sleep)
     run_for(bus, clock, 0.5)
     return bus, drive, clock

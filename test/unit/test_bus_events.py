@@ -62,7 +62,7 @@ def test_the_soak_harness_handles_every_event_type():
 
 
 def test_the_node_shows_every_event_type():
-    node_events = pytest.importorskip('drive_bridge.ros.bus_events',
+    node_events = pytest.importorskip('drive_bridge.ros.node.bus_events',
                                       reason='ROS 2 (rclpy) from PyPI')
     assert set(node_events.HANDLERS) == set(EVENT_TYPES)
 
@@ -93,6 +93,6 @@ def test_the_node_shows_every_event_type():
 
 
 def test_the_joint_bridge_handles_every_event_type():
-    joints = pytest.importorskip('drive_bridge.ros.joints', reason='ROS 2 (rclpy) from PyPI')
+    joints = pytest.importorskip('drive_bridge.ros.node.joints', reason='ROS 2 (rclpy) from PyPI')
     bridge = joints.JointBridge(None, [], lambda message: None, None, lambda: True, 0)
     assert set(bridge.event_handlers) == set(EVENT_TYPES)

@@ -1,5 +1,5 @@
 """
-Unit tests of reading a serialized ``std_msgs/Float32`` (``drive_bridge.ros.cdr``).
+Unit tests of reading a serialized ``std_msgs/Float32`` (``drive_bridge.ros.node.cdr``).
 
 The oracle is rclpy's own serializer: every value it writes must read back the same, and no
 byte string, cut short or garbled, may raise anything but MalformedMessage.
@@ -12,7 +12,7 @@ import struct
 
 import pytest
 
-cdr = pytest.importorskip('drive_bridge.ros.cdr', reason='ROS 2 (rclpy) from PyPI')
+cdr = pytest.importorskip('drive_bridge.ros.node.cdr', reason='ROS 2 (rclpy) from PyPI')
 serialization = pytest.importorskip('rclpy.serialization')
 Float32 = pytest.importorskip('std_msgs.msg').Float32
 DESERIALIZE = functools.partial(serialization.deserialize_message, message_type=Float32)

@@ -4,7 +4,9 @@ import glob
 import math
 import os
 
-from drive_bridge import config
+from drive_bridge.config import model as config
+from drive_bridge.config.node_parameters import check_parameters_block, declared_parameters
+from drive_bridge.config.params_file import load_params_file, load_yaml_file
 from drive_bridge.errors import ConfigError
 from drive_bridge.ros.naming import status_name
 import pytest
@@ -180,7 +182,8 @@ def test_aggregator_config_groups_every_drive_bridge_status():
         parameters = yaml.safe_load(stream)['/**/analyzers']['ros__parameters']
     group = parameters['drives']
     assert group['type'] == 'diagnostic_aggregator/GenericAnalyzer'
-    # Status names: 'drive_bridge: <device>', or '/<ns>/drive_bridge: <device>' (ros/diagnostics).
+    # Status names: 'drive_bridge: <device>', or '/<ns>/drive_bridge: <device>'
+    # (ros/node/diagnostics).
     assert group['contains'] == ['drive_bridge: ']
     for name in (status_name('/drive_bridge', 'feeder'),
                  status_name('/line1/drive_bridge', 'feeder')):
@@ -196,7 +199,7 @@ NODE_BLOCK = {'port': '/dev/ttyUSB0', 'parity': 'E', 'autostart': False,
 
 
 def test_a_node_block_with_only_names_the_node_declares_passes():
-    config.check_parameters_block(NODE_BLOCK)  # nested and flat device blocks, rclpy's own
+    check_parameters_block(NODE_BLOCK)  # nested and flat device blocks, rclpy's own
 
 
 @pytest.mark.parametrize('key, value, message', [
@@ -213,12 +216,12 @@ def test_a_node_block_with_only_names_the_node_declares_passes():
 ])
 def test_a_node_block_is_refused_for_the_first_name_the_node_refuses(key, value, message):
     with pytest.raises(ConfigError) as raised:
-        config.check_parameters_block(dict(NODE_BLOCK, **{key: value}))
+        check_parameters_block(dict(NODE_BLOCK, **{key: value}))
     assert str(raised.value).startswith(message), raised.value
 
 
 def test_the_node_declares_the_names_the_check_takes():
-    declared = config.declared_parameters('modbus_rtu', {'drive': 'fc'})
+    declared = declared_parameters('modbus_rtu', {'drive': 'fc'})
     assert {'baudrate', 'autostart', 'use_sim_time', 'drive.comms_timeout'} <= declared
     assert not {'ap_nak_retries', 'address_format', 'drive.start_time'} & declared
 
@@ -235,7 +238,7 @@ def test_a_parameters_file_is_read_with_rcl_s_types(tmp_path, text, value):
     path = tmp_path / 'line.yaml'
     path.write_text(f'/**/drive_bridge:\n  ros__parameters:\n    parity: {text}\n'
                     f'    devices: [{text}]\n')
-    parameters = config.load_params_file(str(path))['/**/drive_bridge']
+    parameters = load_params_file(str(path))['/**/drive_bridge']
     assert parameters['parity'] == value and type(parameters['parity']) is type(value)
     assert parameters['devices'] == [value]
 
@@ -244,7 +247,7 @@ def read_plain(tmp_path, text):
     """Return the value of ``timeout: text`` in a parameters file, as drive-bridge reads it."""
     path = tmp_path / 'line.yaml'
     path.write_text(f'/**/drive_bridge:\n  ros__parameters:\n    timeout: {text}\n')
-    return config.load_params_file(str(path))['/**/drive_bridge']['timeout']
+    return load_params_file(str(path))['/**/drive_bridge']['timeout']
 
 
 # rcl_yaml_param_parser (parse.c get_value, rcl 9.2 = Jazzy): a plain scalar is an int64 if
@@ -300,7 +303,7 @@ def test_what_rcl_reads_as_text_is_text(tmp_path, text):
 def test_other_yaml_files_keep_yaml_s_own_types(tmp_path):
     path = tmp_path / 'backup.yaml'  # a backup's text value N stays the text N
     path.write_text('value: N\nother: y\n')
-    assert config.load_yaml_file(str(path), 'the backup') == {'value': 'N', 'other': 'y'}
+    assert load_yaml_file(str(path), 'the backup') == {'value': 'N', 'other': 'y'}
 
 
 def test_a_key_of_a_parameters_file_is_a_name_as_rcl_reads_it(tmp_path):
@@ -309,6 +312,6 @@ def test_a_key_of_a_parameters_file_is_a_name_as_rcl_reads_it(tmp_path):
     path.write_text('/**/drive_bridge:\n  ros__parameters:\n    devices: ["on", "n"]\n'
                     '    on:\n      family: fc\n    n:\n      family: fc\n      address: 1\n'
                     '    1: 2\n')
-    parameters = config.load_params_file(str(path))['/**/drive_bridge']
+    parameters = load_params_file(str(path))['/**/drive_bridge']
     assert parameters == {'devices': ['on', 'n'], 'on': {'family': 'fc'},
                           'n': {'family': 'fc', 'address': 1}, '1': 2}

@@ -2,7 +2,7 @@
 
 import math
 
-from drive_bridge import config
+from drive_bridge.config.params_file import load_yaml_file
 from drive_bridge.console import parse_integer, parse_number
 from drive_bridge.errors import ConfigError
 from drive_bridge.settings import MAX_SHOWN_CHARACTERS, shown
@@ -60,13 +60,13 @@ def test_a_file_that_is_no_yaml_text_is_refused_in_one_line(tmp_path, content, e
     path = tmp_path / 'line.yaml'
     path.write_bytes(content)
     with pytest.raises(ConfigError) as refused:
-        config.load_yaml_file(str(path), 'the file')
+        load_yaml_file(str(path), 'the file')
     assert str(refused.value) == f'the file {expected}'
 
 
 def _parser_of(module_name: str):
     """Return the argument parser of one of the package's terminal commands."""
-    if module_name == 'drive_bridge.ros.record':
+    if module_name == 'drive_bridge.ros.record.cli':
         pytest.importorskip('rclpy')
     module = __import__(module_name, fromlist=['build_parser'])
     return module.build_parser()
@@ -85,7 +85,7 @@ def _parser_of(module_name: str):
     ('drive_bridge.tools.cli', [], 'the following arguments are required: COMMAND'),
     ('drive_bridge.sim.cli', ['--nope'], 'unrecognized arguments: --nope'),
     ('drive_bridge.tools.plot_recording', [], 'the following arguments are required'),
-    ('drive_bridge.ros.record', ['--zz'], 'unrecognized arguments: --zz'),
+    ('drive_bridge.ros.record.cli', ['--zz'], 'unrecognized arguments: --zz'),
 ])
 def test_a_refused_command_line_is_one_line_and_exit_status_2(module_name, argv, reason,
                                                               capsys):

@@ -3,8 +3,8 @@
 import pytest
 
 # rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-values = pytest.importorskip('drive_bridge.ros.ctl_values', reason='ROS 2 (rclpy) from PyPI')
-ctl = pytest.importorskip('drive_bridge.ros.ctl', reason='ROS 2 (rclpy) from PyPI')
+values = pytest.importorskip('drive_bridge.ros.ctl.values', reason='ROS 2 (rclpy) from PyPI')
+ctl = pytest.importorskip('drive_bridge.ros.ctl.cli', reason='ROS 2 (rclpy) from PyPI')
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402,I100
 from rcl_interfaces.msg import ParameterType  # noqa: E402

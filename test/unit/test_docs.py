@@ -12,13 +12,13 @@ import os
 import re
 
 from docs_helpers import all_blocks, DOCS, markdown_reference, pages, parameter_reference, ROOT
-from drive_bridge import config
-from drive_bridge.devices import fc
+from drive_bridge.config import model as config
+from drive_bridge.devices import fc51
 from drive_bridge.devices.contracts import FixedControl
-from drive_bridge.devices.drive import DriveProfile
-from drive_bridge.protocol import fc_control
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
+from drive_bridge.protocol import fc_profile
 from drive_bridge.protocol.commands import Command
-from drive_bridge.sim.fc_model import FcModel, FcSimConfig
+from drive_bridge.sim.fc_profile_model import FcProfileModel, FcProfileSimConfig
 import pytest
 
 README_MAX_LINES = 250
@@ -138,10 +138,10 @@ def test_every_page_is_in_the_table_of_contents():
 def test_troubleshooting_says_what_a_drive_started_at_a_0_percent_reference_reads():
     # The page said such a drive stays ready; the manual (004 5.6.4, bit 11 Running: "a start
     # signal or ... output frequency higher than 0 Hz") and the simulated FC 51 say running.
-    model = FcModel(FcSimConfig(), now_s=0.0)
-    model.write_control(fc_control.START_WORD, 0, 0.0)  # start, reference 0 %
+    model = FcProfileModel(FcProfileSimConfig(), now_s=0.0)
+    model.write_control(fc_profile.START_WORD, 0, 0.0)  # start, reference 0 %
     model.advance(1.0)
-    reading = DriveProfile(fc.DATA, 'fc51').reading(
+    reading = FcProfileModbusDrive(fc51.DATA, 'fc51').reading(
         model.status_word(), model.actual_word(), FixedControl(Command.START, 0))
     assert (reading.state, reading.speed_feedback_pct) == ('running', 0.0)
     with open(os.path.join(DOCS, 'troubleshooting.md'), encoding='utf-8') as stream:

@@ -8,12 +8,12 @@ import sys
 # the moment the process module (rclpy, DDS, numpy: threads) begins to be imported.
 PROBE = """
 import os, signal, sys
-import drive_bridge.ros.entry as entry
+import drive_bridge.ros.node.entry as entry
 print(len(os.listdir('/proc/self/task')), 'rclpy' in sys.modules)
 
 class Note:
     def find_spec(self, name, path=None, target=None):
-        if name == 'drive_bridge.ros.process':
+        if name == 'drive_bridge.ros.node.process':
             print(*sorted(int(s) for s in signal.pthread_sigmask(signal.SIG_BLOCK, [])))
         return None
 

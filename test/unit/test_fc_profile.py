@@ -2,20 +2,20 @@
 
 import math
 
-from drive_bridge.devices import fc
+from drive_bridge.devices import fc51
 from drive_bridge.devices.contracts import (
     FixedControl, ParameterOptions, SlowReadouts, TRIP_CODE_UNKNOWN)
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
 from drive_bridge.devices.parameters import decode_value, encode_value, FC_CONVERSION_FACTORS
 from drive_bridge.errors import CommandRefused, DeviceException, ModelMismatch
-from drive_bridge.protocol import crc, fc_control, rtu, words
+from drive_bridge.protocol import crc, fc_profile, rtu, words
 from drive_bridge.protocol.commands import Command
-from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.fc_profile import StatusWord
 from drive_bridge.protocol.requests import (
     ReadCoils, ReadRegisters, WriteCoil, WriteCoils, WriteRegister, WriteRegisters)
-from drive_bridge.sim.fc_device import FcSimDevice
-from drive_bridge.sim.fc_model import FcModel, FcSimConfig
-from drive_bridge.sim.fc_parameter_store import ParameterError
+from drive_bridge.sim.fc_profile_modbus_device import FcProfileModbusDevice
+from drive_bridge.sim.fc_profile_model import FcProfileModel, FcProfileSimConfig
+from drive_bridge.sim.fc_profile_parameter_store import ParameterError
 from fakes import drive_cycle
 import pytest
 
@@ -26,7 +26,7 @@ def frame(text):
 
 # -- manual 004 chapter 5 and the VLT option card manual: frames as vectors -----------
 def test_start_at_40_percent_is_the_manuals_0f_frame():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     control = FixedControl(reference_word=profile.reference_word(40.0))
     write = profile.command_plan(Command.START, control).writes[0]
     assert write == WriteCoils(0, words.words_to_coils([0x047C, 0x1999]))
@@ -34,7 +34,7 @@ def test_start_at_40_percent_is_the_manuals_0f_frame():
 
 
 def test_ramp_stop_is_the_manuals_frame():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     write = profile.command_plan(Command.STOP, FixedControl()).writes[0]
     assert write.frame(1).encode() == frame('01 0F 00 00 00 20 04 3C 04 00 00 89 19')
 
@@ -46,21 +46,21 @@ def test_status_word_0607_from_coils_33_to_48():
     coils = [bool(byte >> bit & 1) for byte in (0x07, 0x06) for bit in range(8)]
     assert words.coils_to_words(coils) == [0x0607]
     status = StatusWord(0x0607)
-    assert status.flag(fc_control.STW_CONTROL_READY) and status.flag(fc_control.STW_UNIT_READY)
-    assert status.flag(fc_control.STW_ENABLED) and status.bus_control
-    assert not status.tripped and not status.flag(fc_control.STW_RUNNING)
+    assert status.flag(fc_profile.STW_CONTROL_READY) and status.flag(fc_profile.STW_UNIT_READY)
+    assert status.flag(fc_profile.STW_ENABLED) and status.bus_control
+    assert not status.tripped and not status.flag(fc_profile.STW_RUNNING)
     assert status.state(None, False) == 'ready'
 
 
 def test_parameter_register_addresses_of_the_manual():
-    assert fc.DATA.spec(342).address == 0x0D5B  # 5.5.4: PNU 342 -> 0x0D5B
-    assert fc.DATA.spec(3).address == 0x001D  # 5.5.5: PNU 3 -> 0x001D
-    assert fc.DATA.spec(734).address == 0x1CAB  # 5.5.6: PNU 734 -> 0x1CAB
-    assert fc.DATA.spec(1614).address == 16139  # protocols.md: 16-14 -> 0x3F0B
+    assert fc51.DATA.spec(342).address == 0x0D5B  # 5.5.4: PNU 342 -> 0x0D5B
+    assert fc51.DATA.spec(3).address == 0x001D  # 5.5.5: PNU 3 -> 0x001D
+    assert fc51.DATA.spec(734).address == 0x1CAB  # 5.5.6: PNU 734 -> 0x1CAB
+    assert fc51.DATA.spec(1614).address == 16139  # protocols.md: 16-14 -> 0x3F0B
 
 
 def test_parameter_plans_encode_to_the_manuals_frames():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     read = profile.parameter_plan(342)
     assert read.transactions == (ReadRegisters(0x0D5B, 2),)
     assert rtu.read_registers_request(1, 0x0D5B, 2).encode()[:6] == frame('01 03 0D 5B 00 02')
@@ -78,31 +78,31 @@ def test_parameter_plans_encode_to_the_manuals_frames():
 
 
 def test_parameter_values_types_and_conversion():
-    spec = fc.DATA.spec(1614)  # int32, conversion -2
+    spec = fc51.DATA.spec(1614)  # int32, conversion -2
     assert decode_value(spec, [0xFFFF, 0xFF9C], FC_CONVERSION_FACTORS) == pytest.approx(-1.0)
     assert encode_value(spec, 2.25, FC_CONVERSION_FACTORS) == [0, 225]
-    hours = fc.DATA.spec(1500)  # conversion 74: raw is hours on the FC series
+    hours = fc51.DATA.spec(1500)  # conversion 74: raw is hours on the FC series
     assert decode_value(hours, [0, 1234], FC_CONVERSION_FACTORS) == 1234
     with pytest.raises(CommandRefused, match='out of range'):
-        encode_value(fc.DATA.spec(804), 300, FC_CONVERSION_FACTORS)
+        encode_value(fc51.DATA.spec(804), 300, FC_CONVERSION_FACTORS)
     with pytest.raises(CommandRefused, match='not a multiple'):
-        encode_value(fc.DATA.spec(341), 1.234, FC_CONVERSION_FACTORS)
-    text = fc.DATA.spec(1540)
+        encode_value(fc51.DATA.spec(341), 1.234, FC_CONVERSION_FACTORS)
+    text = fc51.DATA.spec(1540)
     assert decode_value(text, words.text_to_registers('FC-051', 20), {}) == 'FC-051'
     with pytest.raises(CommandRefused, match='give its data type'):
-        fc.DATA.spec(999)
-    assert fc.DATA.spec(999, 'int16', -1).name == 'parameter (par. 9-99)'
+        fc51.DATA.spec(999)
+    assert fc51.DATA.spec(999, 'int16', -1).name == 'parameter (par. 9-99)'
 
 
 # -- control profile ---------------------------------------------------------------------
 def test_command_words():
-    assert fc_control.COMMAND_WORDS == {
+    assert fc_profile.COMMAND_WORDS == {
         Command.START: 0x047C, Command.STOP: 0x043C, Command.QUICK_STOP: 0x042C,
         Command.COAST_STOP: 0x0434}
-    for word in fc_control.COMMAND_WORDS.values():
-        assert word & (1 << fc_control.CTW_DATA_VALID)
-    assert fc_control.is_start(0x047C) and not fc_control.is_start(0x043C)
-    assert fc_control.with_reset(0x043C) == 0x04BC
+    for word in fc_profile.COMMAND_WORDS.values():
+        assert word & (1 << fc_profile.CTW_DATA_VALID)
+    assert fc_profile.is_start(0x047C) and not fc_profile.is_start(0x043C)
+    assert fc_profile.with_reset(0x043C) == 0x04BC
 
 
 @pytest.mark.parametrize('word, commanded, reached, state', [
@@ -130,9 +130,9 @@ def run_poll(profile, answers, control=None):
     """Run one poll cycle, answering each request by the readout it reads (``answers``)."""
     by_request = {ReadCoils(32, 32): 'status'}
     for key, number in (('drive_type', 1540), ('software_version', 1543)):
-        by_request[DriveProfile._read(fc.DATA.spec(number))] = key
+        by_request[FcProfileModbusDrive._read(fc51.DATA.spec(number))] = key
     for name, spec in profile.readouts.items():
-        by_request[DriveProfile._read(spec)] = name
+        by_request[FcProfileModbusDrive._read(spec)] = name
     keys = []
 
     def answer(request):
@@ -150,7 +150,7 @@ IDENTITY = {'drive_type': words.text_to_registers('FC-051PK75T4E20H3', 20)[:9],
 
 
 def test_nothing_is_written_without_a_command_in_force_then_keepalive_every_poll():
-    profile = DriveProfile(fc.DATA, 'auto')
+    profile = FcProfileModbusDrive(fc51.DATA, 'auto')
     items, reading = run_poll(profile, {'status': status_coils(0x0607), **IDENTITY,
                                         'motor_current': [0, 0]})
     assert not any(request.writes for _, request in items)
@@ -172,7 +172,7 @@ def test_nothing_is_written_without_a_command_in_force_then_keepalive_every_poll
 
 def test_the_keepalive_is_built_when_it_is_sent():
     """A command between two steps of a cycle changes what the next write carries."""
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     profile._identified = True
 
     class Switching(FixedControl):
@@ -186,7 +186,7 @@ def test_the_keepalive_is_built_when_it_is_sent():
 
 
 def test_readouts_rotate_and_current_is_read_every_poll():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     profile._identified = True
     answers = {'status': status_coils(0x0607), 'motor_current': [0, 0], 'frequency': [0],
                'motor_thermal': [0], 'alarm_word': [0, 0], 'warning_word': [0, 0],
@@ -198,7 +198,7 @@ def test_readouts_rotate_and_current_is_read_every_poll():
 
 
 def test_trip_reads_the_alarm_word_in_the_same_poll():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     profile._identified = True
     items, reading = run_poll(profile, {
         'status': status_coils(0x0608 | 0x80), 'motor_current': [0, 0],
@@ -213,19 +213,19 @@ def test_trip_reads_the_alarm_word_in_the_same_poll():
 
 
 def test_unknown_alarm_bits_keep_their_bit_number_and_no_bit_is_code_unknown():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     assert profile.trip_from_alarm_word(1 << 18) == (1018, 'alarm word bit 18')
     assert profile.trip_from_alarm_word(0)[0] == TRIP_CODE_UNKNOWN  # never 0 = not tripped
 
 
 def test_reset_is_a_rising_edge_and_leaves_a_ramp_stop():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     plan = profile.command_plan(Command.RESET, FixedControl(Command.START))
     assert [words.coils_to_words(list(w.values))[0] for w in plan.writes] == [0x04BC, 0x043C]
 
 
 def test_local_operation_refuses_commands():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     profile._identified = True
     _, reading = run_poll(profile, {'status': status_coils(0x0407), 'motor_current': [0, 0]})
     assert 'local operation' in ' '.join(reading.warnings)
@@ -235,13 +235,13 @@ def test_local_operation_refuses_commands():
 
 @pytest.mark.parametrize('bad', [math.nan, math.inf, -math.inf, 200.0, -250.0, 'fast'])
 def test_bad_references_are_refused(bad):
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     with pytest.raises(CommandRefused, match='nothing sent'):
         profile.reference_word(bad)
 
 
 def test_model_mismatch_from_the_fc_type():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     with pytest.raises(ModelMismatch, match="reports type 'FC-302P'"):
         run_poll(profile, {'status': status_coils(0x0607), 'motor_current': [0, 0],
                            'drive_type': words.text_to_registers('FC-302P', 8),
@@ -249,7 +249,7 @@ def test_model_mismatch_from_the_fc_type():
 
 
 def test_identity_that_cannot_be_read_does_not_block_the_drive():
-    profile = DriveProfile(fc.DATA, 'auto')
+    profile = FcProfileModbusDrive(fc51.DATA, 'auto')
     _, reading = run_poll(profile, {'status': status_coils(0x0607), 'motor_current': [0, 0],
                                     'drive_type': DeviceException(2),
                                     'software_version': DeviceException(2)})
@@ -258,13 +258,14 @@ def test_identity_that_cannot_be_read_does_not_block_the_drive():
 
 
 def test_setup_writes_the_control_word_timeout():
-    assert DriveProfile(fc.DATA, 'fc51').setup_plan() == []
-    profile = DriveProfile(fc.DATA, 'fc51', comms_timeout_s=1.5, comms_timeout_function=2)
+    assert FcProfileModbusDrive(fc51.DATA, 'fc51').setup_plan() == []
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51', comms_timeout_s=1.5,
+                                   comms_timeout_function=2)
     assert profile.setup_plan() == [WriteRegisters(8029, (0, 15)), WriteRegister(8039, 2)]
 
 
 def test_exception_texts_with_register_7_detail():
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     assert profile.detail_request(4) == ReadRegisters(6, 1)
     assert profile.detail_request(2) is None
     text = profile.explain_exception(4, 17)
@@ -275,7 +276,8 @@ def test_exception_texts_with_register_7_detail():
 
 # -- the FC 51 model and its Modbus face ---------------------------------------------------
 def make_model(**settings):
-    return FcModel(FcSimConfig(ramp_up_s=2.0, ramp_down_s=1.0, **settings), now_s=0.0)
+    return FcProfileModel(FcProfileSimConfig(ramp_up_s=2.0, ramp_down_s=1.0, **settings),
+                          now_s=0.0)
 
 
 def test_model_ramps_per_3_41_and_3_42_and_coasts_at_once():
@@ -329,14 +331,14 @@ def test_model_trip_and_reset_edge():
 
 
 def test_sim_answers_coils_registers_and_exceptions():
-    device = FcSimDevice(make_model())
+    device = FcProfileModbusDevice(make_model())
     reply = device.handle(rtu.write_coils_request(1, 0, list(
         words.words_to_coils([0x047C, 0x1999]))), 0.0)
     assert reply.encode() == frame('01 0F 00 00 00 20 54 13')  # the manual's reply
     assert device.model.reference_word == 0x1999
     status = device.handle(rtu.read_coils_request(1, 32, 16), 0.0)
     assert status.data[0] == 2
-    write_ro = device.handle(rtu.write_register_request(1, fc.DATA.spec(1614).address, 1), 0)
+    write_ro = device.handle(rtu.write_register_request(1, fc51.DATA.spec(1614).address, 1), 0)
     assert write_ro.function == 0x86 and write_ro.data == bytes([4])
     last_error = device.handle(rtu.read_registers_request(1, 6, 1), 0.0)
     assert last_error.data == bytes([2, 0, 1])  # detail 01: no write access
@@ -349,7 +351,7 @@ def test_sim_answers_coils_registers_and_exceptions():
 
 def test_a_start_read_before_the_drive_moves_is_still_starting_once_it_ramps():
     """A stopped drive reads "on reference" too: that must not end 'starting' before it began."""
-    profile = DriveProfile(fc.DATA, 'fc51')
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     started = FixedControl(Command.START, profile.reference_word(40.0))
     assert profile.reading(0x0703, 0, started).state == 'ready'  # start acknowledged, not yet
     assert profile.reading(0x0E07, 0x0400, started).state == 'starting'  # ramping
@@ -366,7 +368,7 @@ def slow_never_due():
 
 
 def test_a_warning_word_read_during_a_warning_is_read_again_when_it_ends():
-    profile = DriveProfile(fc.DATA, 'fc51', slow_readouts=slow_never_due())
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51', slow_readouts=slow_never_due())
     profile._identified = True
     answers = {'status': status_coils(0x0607 | 0x80), 'motor_current': [0, 0],
                'warning_word': [0, 1 << 5]}
@@ -382,7 +384,7 @@ def test_a_warning_word_read_during_a_warning_is_read_again_when_it_ends():
 
 
 def test_an_alarm_word_read_during_a_trip_is_read_again_after_the_reset():
-    profile = DriveProfile(fc.DATA, 'fc51', slow_readouts=slow_never_due())
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51', slow_readouts=slow_never_due())
     profile._identified = True
     answers = {'status': status_coils(0x0608), 'motor_current': [0, 0],
                'alarm_word': [0, 1 << 5]}
@@ -396,24 +398,24 @@ def test_an_alarm_word_read_during_a_trip_is_read_again_after_the_reset():
 def test_a_start_with_a_0_percent_reference_reads_running_at_0_hz():
     """Manual 004 5.6.4: bit 11 is set by a start signal, bit 8 when the speed is the reference."""
     model = make_model()
-    model.write_control(fc_control.START_WORD, 0, 0.0)  # start, reference 0 %
+    model.write_control(fc_profile.START_WORD, 0, 0.0)  # start, reference 0 %
     model.advance(1.0)
     status = StatusWord(model.status_word())
     assert model.output_pct == 0.0 and model.motor_current_a() == 0.0
-    assert status.flag(fc_control.STW_RUNNING) and status.flag(fc_control.STW_ON_REFERENCE)
-    profile = DriveProfile(fc.DATA, 'fc51')
+    assert status.flag(fc_profile.STW_RUNNING) and status.flag(fc_profile.STW_ON_REFERENCE)
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51')
     started = FixedControl(Command.START, 0)
     reading = profile.reading(model.status_word(), model.actual_word(), started)
     assert reading.state == 'running' and reading.speed_feedback_pct == 0.0
-    model.write_control(fc_control.RAMP_STOP_WORD, 0, 1.0)  # no start signal: ready
+    model.write_control(fc_profile.RAMP_STOP_WORD, 0, 1.0)  # no start signal: ready
     assert profile.reading(model.status_word(), model.actual_word(),
                            FixedControl(Command.STOP)).state == 'ready'
 
 
 def test_the_simulated_fc51_reports_the_line_it_is_served_on():
-    served = FcModel(FcSimConfig(address=3, protocol='fc_protocol', baudrate=38400,
-                                 parity='O', stopbits=1), now_s=0.0)
+    served = FcProfileModel(FcProfileSimConfig(address=3, protocol='fc_protocol', baudrate=38400,
+                                               parity='O', stopbits=1), now_s=0.0)
     assert [served.read_parameter(n, 1, 0.0) for n in (830, 831, 832, 833)] == [
         [0], [3], [4], [1]]
     with pytest.raises(ValueError, match='no par. 8-3x option for baud rate 1200: allowed'):
-        FcModel(FcSimConfig(baudrate=1200), now_s=0.0)
+        FcProfileModel(FcProfileSimConfig(baudrate=1200), now_s=0.0)

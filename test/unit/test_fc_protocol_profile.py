@@ -1,13 +1,13 @@
 """Unit tests of the FC-protocol drive profile: one telegram per poll, commands, parameters."""
 
-from drive_bridge.config import build_config
-from drive_bridge.devices import fc, vlt
+from drive_bridge.config.model import build_config
+from drive_bridge.devices import fc51, vlt
 from drive_bridge.devices.contracts import FixedControl, ParameterOptions, SlowReadouts
 from drive_bridge.devices.fc_protocol_drive import FcProtocolDriveProfile
 from drive_bridge.errors import CommandRefused, ConfigError, DeviceException
 from drive_bridge.protocol import fc_telegram as fcp
 from drive_bridge.protocol.commands import Command
-from drive_bridge.protocol.fc_control import RAMP_STOP_WORD, START_WORD
+from drive_bridge.protocol.fc_profile import RAMP_STOP_WORD, START_WORD
 from fakes import drive_cycle
 import pytest
 
@@ -32,7 +32,7 @@ def answer(status=READY, actual=0, values=None):
 
 
 def test_one_telegram_per_poll_and_nothing_valid_without_a_command():
-    profile = FcProtocolDriveProfile(fc.DATA, 'auto')
+    profile = FcProtocolDriveProfile(fc51.DATA, 'auto')
     requests, reading = drive_cycle(profile, answer(values={1614: 150}))
     assert [r.ak for r in requests] == [fcp.AK_TEXT, fcp.AK_TEXT, fcp.AK_READ]  # identity once
     assert profile.model == 'fc51' and reading.state == 'ready'
@@ -44,7 +44,7 @@ def test_one_telegram_per_poll_and_nothing_valid_without_a_command():
 
 
 def test_the_poll_telegram_carries_the_command_in_force_and_the_reference():
-    profile = FcProtocolDriveProfile(fc.DATA, 'fc51')
+    profile = FcProtocolDriveProfile(fc51.DATA, 'fc51')
     profile._identified = True
     running = FixedControl(Command.START, profile.reference_word(40.0))
     requests, reading = drive_cycle(profile, answer(RUNNING, 0x1999), running)
@@ -56,7 +56,7 @@ def test_the_poll_telegram_carries_the_command_in_force_and_the_reference():
 
 
 def test_readouts_current_every_other_poll_and_the_alarm_word_after_a_trip():
-    profile = FcProtocolDriveProfile(fc.DATA, 'fc51')
+    profile = FcProtocolDriveProfile(fc51.DATA, 'fc51')
     profile._identified = True
     read = [drive_cycle(profile, answer())[0][0].pnu for _ in range(6)]
     assert read[0::2] == [1614, 1614, 1614] and 1614 not in read[1::2]
@@ -67,7 +67,7 @@ def test_readouts_current_every_other_poll_and_the_alarm_word_after_a_trip():
 
 
 def test_a_refused_readout_keeps_the_status_of_its_reply():
-    profile = FcProtocolDriveProfile(fc.DATA, 'fc51')
+    profile = FcProtocolDriveProfile(fc51.DATA, 'fc51')
     profile._identified = True
     requests, reading = drive_cycle(profile, answer(RUNNING, values={1614: Exception(0)}),
                                     FixedControl(Command.START))
@@ -87,7 +87,7 @@ def test_the_vlt5000_vector_reads_par_520():
 
 
 def test_commands_are_process_telegrams_and_reset_leaves_a_ramp_stop():
-    profile = FcProtocolDriveProfile(fc.DATA, 'fc51')
+    profile = FcProtocolDriveProfile(fc51.DATA, 'fc51')
     control = FixedControl(reference_word=0x2000)
     start = profile.command_plan(Command.START, control).writes
     assert start == (fcp.process_request(START_WORD, 0x2000),)
@@ -98,7 +98,7 @@ def test_commands_are_process_telegrams_and_reset_leaves_a_ramp_stop():
 
 
 def test_parameters_by_pke_text_and_eeprom():
-    profile = FcProtocolDriveProfile(fc.DATA, 'fc51')
+    profile = FcProtocolDriveProfile(fc51.DATA, 'fc51')
     read = profile.parameter_plan(341)
     assert read.transactions[0].ak == fcp.AK_READ and not read.transactions[0].writes
     write = profile.parameter_plan(341, 2.5, ParameterOptions(eeprom=True)).transactions[0]
@@ -111,7 +111,7 @@ def test_parameters_by_pke_text_and_eeprom():
 
 
 def test_setup_writes_8_03_and_8_04_by_the_parameter_channel():
-    profile = FcProtocolDriveProfile(fc.DATA, 'fc51', comms_timeout_s=1.5,
+    profile = FcProtocolDriveProfile(fc51.DATA, 'fc51', comms_timeout_s=1.5,
                                      comms_timeout_function=2)
     writes = profile.setup_plan()
     assert [(w.pnu, w.pwe) for w in writes] == [(803, 15), (804, 2)]
@@ -142,7 +142,7 @@ def test_a_trip_is_not_named_by_the_alarm_word_of_an_earlier_one():
     slow = SlowReadouts(1000.0)
     slow.due(0.0)  # never due again at time 0 (drive_cycle's): the alarm word is read
     # only because of a trip
-    profile = FcProtocolDriveProfile(fc.DATA, 'fc51', slow_readouts=slow)
+    profile = FcProtocolDriveProfile(fc51.DATA, 'fc51', slow_readouts=slow)
     profile._identified = True
     over_current, timeout = 1 << 5, 1 << 4
     drive_cycle(profile, answer(TRIPPED))  # the status shows the trip
@@ -157,7 +157,7 @@ def test_a_trip_is_not_named_by_the_alarm_word_of_an_earlier_one():
 
 
 def test_a_warning_word_read_during_a_warning_is_not_published_after_it():
-    profile = FcProtocolDriveProfile(fc.DATA, 'fc51')
+    profile = FcProtocolDriveProfile(fc51.DATA, 'fc51')
     profile._identified = True
     warning = READY | 0x80
     drive_cycle(profile, answer(warning))  # the status shows the warning

@@ -7,13 +7,13 @@ random wire bytes raise only TransportError; simulated devices answer any frame 
 silent. Seeded by hypothesis's database-free default settings, so failures reproduce.
 """
 
-from drive_bridge.config import build_device
+from drive_bridge.config.model import build_device
 from drive_bridge.devices.contracts import FixedControl
 from drive_bridge.errors import ModelMismatch, ProtocolError, TransportError
 from drive_bridge.protocol import ap_ascii, fc_telegram, lvsg, rtu
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.crc import append_crc, crc_ok
-from drive_bridge.protocol.fc_control import StatusWord
+from drive_bridge.protocol.fc_profile import StatusWord
 from drive_bridge.protocol.requests import (
     AsciiCommand, AsciiRequest, ReadCoils, ReadRegisters, WriteCoils, WriteRegister,
     WriteRegisters)

@@ -52,14 +52,15 @@ def test_help_of_the_commands_without_ros_is_plain_text(build):
 
 def test_help_of_the_ros_commands_is_plain_text():
     pytest.importorskip('rclpy')
-    from drive_bridge.ros import ctl, record
+    from drive_bridge.ros.ctl import cli as ctl
+    from drive_bridge.ros.record import cli as record
     assert markup_in(ctl._parser()) == []
     assert markup_in(record.build_parser()) == []
 
 
 def test_drive_bridge_ctl_help_as_printed_is_plain_text():
     pytest.importorskip('rclpy')
-    result = subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl', '--help'],
+    result = subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', '--help'],
                             capture_output=True, text=True, timeout=120,
                             env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
     assert result.returncode == 0, result.stderr

@@ -1,5 +1,5 @@
 """
-Unit tests of reading serialized ``~/joint_commands`` (``drive_bridge.ros.joints.wire``).
+Unit tests of reading serialized ``~/joint_commands`` (``drive_bridge.ros.node.joints.wire``).
 
 The oracle is rclpy's own serializer: every message it writes must read back to the same
 names and velocities, and no byte string, cut short or garbled, may raise anything but
@@ -11,7 +11,7 @@ import struct
 
 import pytest
 
-wire = pytest.importorskip('drive_bridge.ros.joints.wire', reason='ROS 2 (rclpy) from PyPI')
+wire = pytest.importorskip('drive_bridge.ros.node.joints.wire', reason='ROS 2 (rclpy) from PyPI')
 serialization = pytest.importorskip('rclpy.serialization')
 JointState = pytest.importorskip('sensor_msgs.msg').JointState
 

@@ -7,9 +7,9 @@ are collected instead of published.
 
 import math
 
-from drive_bridge import config
 from drive_bridge.bus.events import ReadingEvent
 from drive_bridge.bus.master import BusMaster, BusTiming
+from drive_bridge.config import model as config
 from drive_bridge.devices.contracts import DeviceReading
 from drive_bridge.errors import ConfigError, NoResponse
 from drive_bridge.protocol import words
@@ -21,7 +21,7 @@ from fakes import FakeClock, kind, run_for
 import pytest
 
 # rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-joints = pytest.importorskip('drive_bridge.ros.joints', reason='ROS 2 (rclpy) from PyPI')
+joints = pytest.importorskip('drive_bridge.ros.node.joints', reason='ROS 2 (rclpy) from PyPI')
 JointState = pytest.importorskip('sensor_msgs.msg').JointState
 
 DRIVE = {'family': 'fc', 'model': 'fc51', 'address': 1}

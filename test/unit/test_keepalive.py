@@ -1,7 +1,9 @@
 """The keepalive rule: the longest gap between two polls of a drive, and what is refused."""
 
-from drive_bridge import config
 from drive_bridge.bus.keepalive import keepalive_gap, LineTimes, PollLoad, round_up
+from drive_bridge.config import model as config
+from drive_bridge.config.node_parameters import split_parameters
+from drive_bridge.config.params_file import load_params_file
 from drive_bridge.errors import ConfigError
 import pytest
 
@@ -139,10 +141,10 @@ def test_every_drive_in_the_example_configs_has_the_margin():
     root = os.path.join(os.path.dirname(__file__), '..', '..', 'config')
     checked = 0
     for path in sorted(glob.glob(os.path.join(root, '**', '*.yaml'), recursive=True)):
-        for block in config.load_params_file(path).values():
+        for block in load_params_file(path).values():
             if 'devices' not in block:
                 continue
-            bus, devices = config.split_parameters(block)
+            bus, devices = split_parameters(block)
             built = config.build_config(bus, devices)
             for name, gap in config.keepalive_gaps(built).items():
                 assert built.device(name).option('comms_timeout') >= gap.advised_s, \

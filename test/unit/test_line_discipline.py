@@ -11,7 +11,7 @@ from drive_bridge.errors import (
     AmbiguousReply, BadFrame, CrcError, DeviceException, LineBabble, LinkDown, MismatchedReply,
     NoResponse, TruncatedFrame, WrongAddress)
 from drive_bridge.protocol import ap_ascii, rtu
-from drive_bridge.protocol import fc_telegram as fc
+from drive_bridge.protocol import fc_telegram
 from drive_bridge.protocol.requests import (
     AsciiCommand, AsciiRequest, ReadRegisters, WriteCoils, WriteRegister)
 from drive_bridge.protocol.words import words_to_coils
@@ -460,29 +460,31 @@ def fc_line(*replies):
 
 
 def fc_reply(status: int, value: int, adr: int = 0x81) -> bytes:
-    return fc.FcTelegram(adr, status, value).encode()
+    return fc_telegram.FcTelegram(adr, status, value).encode()
 
 
 def test_a_held_process_reply_and_the_answer_fail_the_exchange():
     transport, line, clock = fc_line([], [(0.01, fc_reply(0x0607, 0x1111)),
                                           (0.03, fc_reply(0x0607, 0x2222))])
     with pytest.raises(NoResponse):
-        transport.execute(1, fc.process_request(0x047C, 0x1111))
+        transport.execute(1, fc_telegram.process_request(0x047C, 0x1111))
     with pytest.raises(AmbiguousReply):
-        transport.execute(1, fc.process_request(0x047C, 0x2222))
+        transport.execute(1, fc_telegram.process_request(0x047C, 0x2222))
 
 
 def test_a_parameter_reply_to_a_process_telegram_is_a_late_one():
-    parameter = fc.FcTelegram(0x81, 0x0607, 0, fc.make_pke(fc.AK_REPLY_WORD, 1614)).encode()
+    parameter = fc_telegram.FcTelegram(0x81, 0x0607, 0,
+                                       fc_telegram.make_pke(fc_telegram.AK_REPLY_WORD,
+                                                            1614)).encode()
     transport, line, clock = fc_line([(0.01, parameter)])
     with pytest.raises(MismatchedReply):
-        transport.execute(1, fc.process_request(0x047C, 0))
+        transport.execute(1, fc_telegram.process_request(0x047C, 0))
 
 
 def test_a_telegram_from_another_address_is_skipped_and_counted():
     transport, line, clock = fc_line([(0.01, fc_reply(0x0607, 1, adr=0x82)),
                                       (0.03, fc_reply(0x0607, 2))])
-    assert transport.execute(1, fc.process_request(0x047C, 0)).pcd2 == 2
+    assert transport.execute(1, fc_telegram.process_request(0x047C, 0)).pcd2 == 2
     assert late_units(transport) == [2]
 
 
@@ -497,8 +499,8 @@ def test_a_broadcast_on_an_echoing_line_reads_its_echo():
     line = ScriptedLine(clock, device)
     transport = FcProtocolTransport(settings, clock=clock, line=line)
     transport.connect()
-    assert transport.execute(0, fc.process_request(0x047C, 0)) is None
-    assert transport.execute(1, fc.process_request(0x047C, 0)).pcd2 == 0x1234
+    assert transport.execute(0, fc_telegram.process_request(0x047C, 0)) is None
+    assert transport.execute(1, fc_telegram.process_request(0x047C, 0)).pcd2 == 0x1234
     assert transport.last_report.late == [] and transport.last_report.held_s == 0.0
 
 
@@ -536,9 +538,9 @@ def test_a_lone_stx_does_not_settle_an_fc_reply_held_by_a_gateway():
     start_reply = fc_reply(0x0F07, 0x2000)
     transport, line, clock = fc_line([(0.002, b'\x02')], [(0.0, start_reply)])
     with pytest.raises(TruncatedFrame):
-        transport.execute(1, fc.process_request(0x047F, 0x2000))
+        transport.execute(1, fc_telegram.process_request(0x047F, 0x2000))
     with pytest.raises(AmbiguousReply):  # the stop, never answered, gets the held reply
-        transport.execute(1, fc.process_request(0x043C, 0x2000))
+        transport.execute(1, fc_telegram.process_request(0x043C, 0x2000))
 
 
 @pytest.mark.parametrize('noise', [b'\x02', b'\x00\x00\x07\x00'])

@@ -65,10 +65,10 @@ def poll(profile, input_bytes, output_bytes=None, control=None, now_s=0.0):
     keys = []
 
     def answer(request):
-        if request == ReadRegisters(profile.output_register, profile.output_registers):
+        if request == profile.gateway.read_back():
             keys.append('output')
             return image(output_bytes if output_bytes is not None else bytes(3))
-        if request == ReadRegisters(profile.input_register, profile.input_registers):
+        if request == profile.gateway.read_input():
             keys.append('input')
             return image(input_bytes)
         keys.append('write')
@@ -113,7 +113,7 @@ def test_a_fwd_run_left_in_the_gateway_for_a_stopped_starter_is_written_back_cle
     assert [key for key, _ in items] == ['output', 'input', 'write']  # the clear first
     cleared = written_control(items[-1][1])
     assert not cleared.fwd_run and cleared.quick_stop  # only Fwd Run is cleared
-    assert not reading.fault and profile.image.fwd_run is False
+    assert not reading.fault and profile.gateway.image.fwd_run is False
     items, _ = poll(profile, answer(0, 0))
     assert [key for key, _ in items] == ['write', 'input']  # the request alone from now on
 
@@ -131,10 +131,10 @@ def test_a_running_starter_keeps_the_fwd_run_it_has():
     running = LvsgProfile('mcd202', input_register=0, output_register=100)
     items, _ = poll(running, answer(0, 0, ready=False, on=True), output_bytes=bytes([1, 0, 0]))
     assert [key for key, _ in items] == ['output', 'input']
-    assert running.image.fwd_run is True
+    assert running.gateway.image.fwd_run is True
     items, _ = poll(running, answer(0, 0, ready=False, on=True))
     assert items[0] == ('write', WriteRegister(101, 1 << 8))  # the request, never the control
-    assert running.image.fwd_run is True
+    assert running.gateway.image.fwd_run is True
 
 
 def test_a_trip_asks_for_the_trip_code_next():
@@ -249,7 +249,7 @@ def poll_until_state_byte(profile, clock, state_byte, control, **status):
     requested = [0]
 
     def reply(request):
-        if request == ReadRegisters(profile.input_register, profile.input_registers):
+        if request == profile.gateway.read_input():
             return image(answer(requested[-1], values.get(requested[-1], 0), **status))
         if isinstance(request, WriteRegisters):
             requested.append(request.values[1] >> 8)

@@ -2,7 +2,7 @@
 
 import math
 
-from drive_bridge.devices import fc, mcd, vlt
+from drive_bridge.devices import fc51, mcd, vlt
 from drive_bridge.devices.fc51_parameters import (
     BAUD_BY_OPTION, FC51_NAMED, FC51_NAMED_RANGES, FC51_PARAMETERS, FC51_TABLE,
     FRAMING_BY_OPTION, label, PROTOCOL_BY_OPTION)
@@ -109,8 +109,8 @@ def conflicts(old, new, where):
 
 
 def test_every_fc_py_parameter_and_readout_is_in_the_fc51_table():
-    assert conflicts(fc.PARAMETERS, FC51_PARAMETERS, 'fc.py') == []
-    for name, number in fc.READOUTS['fc51'].items():
+    assert conflicts(fc51.PARAMETERS, FC51_PARAMETERS, 'fc.py') == []
+    for name, number in fc51.READOUTS['fc51'].items():
         assert FC51_PARAMETERS[number].setting is False, name
 
 
@@ -126,7 +126,7 @@ def test_every_vlt_py_parameter_and_readout_is_in_a_model_table():
 
 
 def test_backups_take_the_settings_from_the_tables():
-    assert fc.DATA.settings('fc51') == sorted(
+    assert fc51.DATA.settings('fc51') == sorted(
         spec.number for spec in FC_SPECS if spec.setting)
     vlt6000 = vlt.DATA.settings('vlt6000')
     assert 533 in vlt6000  # Display Text is written, so it is backed up

@@ -2,7 +2,7 @@
 
 import math
 
-from drive_bridge.protocol import crc, fc_scaling, rtu, words
+from drive_bridge.protocol import crc, fc_profile_scaling, rtu, words
 import pytest
 
 
@@ -95,19 +95,19 @@ def test_words():
     (-200.0, 0x8000), (-100.0, 0xC000), (199.99, 0x7FFE), (-40.0, 0xE667),
 ])
 def test_fc_scaling(percent, word):
-    assert fc_scaling.percent_to_word(percent) == word
+    assert fc_profile_scaling.percent_to_word(percent) == word
 
 
 @pytest.mark.parametrize('bad', [200.0, 250.0, -200.01, math.nan, math.inf, -math.inf])
 def test_fc_scaling_rejects(bad):
     with pytest.raises(ValueError):
-        fc_scaling.percent_to_word(bad)
+        fc_profile_scaling.percent_to_word(bad)
 
 
 def test_fc_actual_value_decodes_signed():
-    assert fc_scaling.word_to_percent(0x4000) == 100.0
-    assert fc_scaling.word_to_percent(0xC000) == -100.0
-    assert fc_scaling.word_to_percent(0x1999) == pytest.approx(39.996, abs=1e-3)
+    assert fc_profile_scaling.word_to_percent(0x4000) == 100.0
+    assert fc_profile_scaling.word_to_percent(0xC000) == -100.0
+    assert fc_profile_scaling.word_to_percent(0x1999) == pytest.approx(39.996, abs=1e-3)
 
 
 def test_the_reply_framer_needs_more_bytes_until_the_reply_is_whole():

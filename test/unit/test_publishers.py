@@ -4,7 +4,8 @@ from drive_bridge.devices.contracts import DeviceReading
 import pytest
 
 # rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-publishers = pytest.importorskip('drive_bridge.ros.publishers', reason='ROS 2 (rclpy) from PyPI')
+publishers = pytest.importorskip('drive_bridge.ros.node.publishers',
+                                 reason='ROS 2 (rclpy) from PyPI')
 
 
 class FakePublisher:
@@ -101,7 +102,7 @@ class DiagnosticsNode:
 
 
 def test_diagnostics_nobody_listens_to_are_not_even_built():
-    node_diagnostics = pytest.importorskip('drive_bridge.ros.node_diagnostics')
+    node_diagnostics = pytest.importorskip('drive_bridge.ros.node.diagnostics_publisher')
     node = DiagnosticsNode()
     diagnostics = node_diagnostics.DiagnosticsPublisher(node)
     diagnostics.publish(None)

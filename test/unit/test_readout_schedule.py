@@ -1,10 +1,10 @@
 """The slow readouts come at most once a readout period; the fast values every poll."""
 
 from drive_bridge.bus.master import BusMaster
-from drive_bridge.config import build_config
-from drive_bridge.devices import fc, mcd
+from drive_bridge.config.model import build_config
+from drive_bridge.devices import fc51, mcd
 from drive_bridge.devices.contracts import Freshness, SlowReadouts
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
 from drive_bridge.devices.lvsg import LvsgProfile
 from drive_bridge.devices.mcd_ascii import McdAsciiProfile
 from drive_bridge.protocol import lvsg, words
@@ -37,7 +37,7 @@ def fc_answer(request):
 
 def test_an_fc51_reads_status_and_current_every_poll_and_one_slow_readout_a_period():
     clock, schedule = slow(1.0)
-    profile = DriveProfile(fc.DATA, 'fc51', slow_readouts=schedule)
+    profile = FcProfileModbusDrive(fc51.DATA, 'fc51', slow_readouts=schedule)
     profile._identified = True
     polls = []
     for _ in range(10):  # ten polls in 0.5 s

@@ -16,12 +16,12 @@ import sys
 import types
 from xml.etree import ElementTree
 
-from drive_bridge import config
+from drive_bridge.config import model as config
 import pytest
 import yaml
 
 # Neither is in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-joints = pytest.importorskip('drive_bridge.ros.joints', reason='ROS 2 (rclpy) from PyPI')
+joints = pytest.importorskip('drive_bridge.ros.node.joints', reason='ROS 2 (rclpy) from PyPI')
 xacro = pytest.importorskip('xacro', reason='pip install xacro')
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..'))

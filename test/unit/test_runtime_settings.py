@@ -5,7 +5,8 @@ from typing import Dict, List
 import pytest
 
 # rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-parameters = pytest.importorskip('drive_bridge.ros.parameters', reason='ROS 2 (rclpy) from PyPI')
+parameters = pytest.importorskip('drive_bridge.ros.node.parameters',
+                                 reason='ROS 2 (rclpy) from PyPI')
 Parameter = pytest.importorskip('rclpy.parameter').Parameter
 keep_declared_types, RuntimeSettings = parameters.keep_declared_types, parameters.RuntimeSettings
 

@@ -9,10 +9,10 @@ from drive_bridge.protocol.commands import Command
 import pytest
 
 # rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
-service_calls = pytest.importorskip('drive_bridge.ros.service_calls',
+service_calls = pytest.importorskip('drive_bridge.ros.node.service_calls',
                                     reason='ROS 2 (rclpy) from PyPI')
-gate_module = pytest.importorskip('drive_bridge.ros.gate', reason='ROS 2 (rclpy) from PyPI')
-device_interface = pytest.importorskip('drive_bridge.ros.device_interface',
+gate_module = pytest.importorskip('drive_bridge.ros.node.gate', reason='ROS 2 (rclpy) from PyPI')
+device_interface = pytest.importorskip('drive_bridge.ros.node.device_interface',
                                        reason='ROS 2 (rclpy) from PyPI')
 
 

@@ -7,8 +7,8 @@ import pytest
 DiagnosticStatus = pytest.importorskip(
     'diagnostic_msgs.msg', reason='ROS messages are not installed here').DiagnosticStatus
 from drive_bridge.bus.events import DeviceOffline, DeviceOnline  # noqa: E402, I100
-from drive_bridge.ros import bus_events  # noqa: E402
-from drive_bridge.ros.diagnostics import diagnostic_status  # noqa: E402
+from drive_bridge.ros.node import bus_events  # noqa: E402
+from drive_bridge.ros.node.diagnostics import diagnostic_status  # noqa: E402
 from fakes import run_for  # noqa: E402
 from test_bus_drive import make_bus  # noqa: E402
 

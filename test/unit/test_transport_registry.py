@@ -36,7 +36,7 @@ def test_the_transport_of_each_protocol_is_built_without_opening_the_link(
     assert type(make_transport(link, options)) is expected
 
 
-@pytest.mark.parametrize('module', ['drive_bridge.transport.engines', 'drive_bridge.config'])
+@pytest.mark.parametrize('module', ['drive_bridge.transport.engines', 'drive_bridge.config.model'])
 def test_pymodbus_is_imported_only_by_a_transport_that_uses_it(module):
     """Every node start and CLI command imports the registry; pymodbus costs ~0.1 s of CPU."""
     probe = (f'import sys, {module}; '

@@ -1,16 +1,16 @@
 """Unit tests of the VLT 5000/6000 option card profile: the manual's examples 1-6 and tables."""
 
-from drive_bridge import config
+from drive_bridge.config import model as config
 from drive_bridge.devices import vlt
 from drive_bridge.devices.contracts import FixedControl, ParameterOptions, SlowReadouts
-from drive_bridge.devices.drive import DriveProfile
+from drive_bridge.devices.fc_profile_drive import FcProfileModbusDrive
 from drive_bridge.devices.parameters import decode_value
 from drive_bridge.errors import CommandRefused, ConfigError
 from drive_bridge.protocol import crc, rtu, words
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.requests import ReadRegisters, WriteCoil, WriteRegister
-from drive_bridge.sim.fc_device import FcSimDevice
-from drive_bridge.sim.fc_model import FcModel, FcSimConfig
+from drive_bridge.sim.fc_profile_modbus_device import FcProfileModbusDevice
+from drive_bridge.sim.fc_profile_model import FcProfileModel, FcProfileSimConfig
 from fakes import drive_cycle
 import pytest
 
@@ -26,14 +26,14 @@ def encode(unit, request):
 
 @pytest.fixture
 def profile():
-    return DriveProfile(vlt.DATA, 'vlt6000')
+    return FcProfileModbusDrive(vlt.DATA, 'vlt6000')
 
 
 def test_example_1_start_at_40_percent_and_its_reply(profile):
     control = FixedControl(reference_word=profile.reference_word(40.0))
     request = encode(1, profile.command_plan(Command.START, control).writes[0])
     assert request == frame('01 0F 00 00 00 20 04 7C 04 99 19 37 43')
-    device = FcSimDevice(FcModel(FcSimConfig(model='vlt6000')))
+    device = FcProfileModbusDevice(FcProfileModel(FcProfileSimConfig(model='vlt6000')))
     reply = device.handle(rtu.decode_request(request).frame, 0.0)
     assert reply.encode() == frame('01 0F 00 00 00 20 54 13')
 
@@ -48,8 +48,8 @@ def test_example_3_coast_stop():
     # bridge's coast (0x0434) clears only the coast bit and leaves relays and set-ups alone.
     manual = rtu.write_coils_request(1, 0, list(words.words_to_coils([0x2C20, 0]))).encode()
     assert manual[:11] == frame('01 0F 00 00 00 20 04 20 2C 00 00') and crc.crc_ok(manual)
-    coast = DriveProfile(vlt.DATA, 'vlt5000').command_plan(Command.COAST_STOP,
-                                                           FixedControl()).writes[0]
+    coast = FcProfileModbusDrive(vlt.DATA, 'vlt5000').command_plan(Command.COAST_STOP,
+                                                                   FixedControl()).writes[0]
     assert words.coils_to_words(list(coast.values))[0] == 0x0434
     assert not 0x0434 & (1 << 3)  # bit 3 = 0: coast
 
@@ -88,9 +88,9 @@ def test_conversion_index_74_is_3_6_here():
 
 
 def test_readouts_per_model_and_override():
-    assert DriveProfile(vlt.DATA, 'vlt6000').readouts['motor_current'].number == 514
-    assert DriveProfile(vlt.DATA, 'vlt5000').readouts['motor_current'].number == 520
-    override = DriveProfile(vlt.DATA, 'vlt5000', readout_overrides={'motor_current': 514})
+    assert FcProfileModbusDrive(vlt.DATA, 'vlt6000').readouts['motor_current'].number == 514
+    assert FcProfileModbusDrive(vlt.DATA, 'vlt5000').readouts['motor_current'].number == 520
+    override = FcProfileModbusDrive(vlt.DATA, 'vlt5000', readout_overrides={'motor_current': 514})
     assert override.readouts['motor_current'].number == 514
     assert set(override.readouts) == {'motor_current', 'alarm_word', 'warning_word',
                                       'extended_status'}
@@ -108,12 +108,12 @@ def test_exception_codes_of_the_option_card(profile):
 
 
 def test_comms_timeouts_go_to_registers_2_and_3_in_10_ms_units():
-    profile = DriveProfile(vlt.DATA, 'vlt6000', comms_timeout_s=1.5)
+    profile = FcProfileModbusDrive(vlt.DATA, 'vlt6000', comms_timeout_s=1.5)
     assert profile.setup_plan() == [WriteRegister(1, 150)]
-    both = DriveProfile(vlt.DATA, 'vlt6000', comms_timeout_s=1.5, drive_link_timeout_s=0.5)
+    both = FcProfileModbusDrive(vlt.DATA, 'vlt6000', comms_timeout_s=1.5, drive_link_timeout_s=0.5)
     assert both.setup_plan() == [WriteRegister(1, 150), WriteRegister(2, 50)]
     with pytest.raises(ConfigError, match='up to 655.35 s'):
-        DriveProfile(vlt.DATA, 'vlt6000', comms_timeout_s=700.0)
+        FcProfileModbusDrive(vlt.DATA, 'vlt6000', comms_timeout_s=700.0)
 
 
 def test_index_register_is_ind(profile):
@@ -137,7 +137,7 @@ def test_vlt_configuration_errors(device, message):
 
 
 def test_option_card_sim_exceptions_and_text_mode():
-    device = FcSimDevice(FcModel(FcSimConfig(model='vlt6000')))
+    device = FcProfileModbusDevice(FcProfileModel(FcProfileSimConfig(model='vlt6000')))
     missing = device.handle(rtu.read_registers_request(1, 10 * 999 - 1, 1), 0.0)
     assert missing.function == 0x83 and missing.data == bytes([0])
     text_without_ind = device.handle(rtu.read_registers_request(1, 5329, 10), 0.0)
@@ -154,8 +154,8 @@ def test_the_alarm_word_agrees_with_the_simulated_drive_after_a_reset():
     slow = SlowReadouts(1000.0)
     slow.due(0.0)  # never due again at time 0 (drive_cycle's): the alarm word is read
     # only because of the trip bits
-    profile = DriveProfile(vlt.DATA, 'vlt6000', slow_readouts=slow)
-    device = FcSimDevice(FcModel(FcSimConfig(model='vlt6000')))
+    profile = FcProfileModbusDrive(vlt.DATA, 'vlt6000', slow_readouts=slow)
+    device = FcProfileModbusDevice(FcProfileModel(FcProfileSimConfig(model='vlt6000')))
 
     def answer(request):
         sent = request.frame(1)

@@ -5,7 +5,7 @@ import io
 import logging
 import os
 
-from drive_bridge.config import build_config
+from drive_bridge.config.model import build_config
 from drive_bridge.errors import ConfigError
 from drive_bridge.protocol.crc import append_crc
 from drive_bridge.tools import trace_text
