@@ -1,5 +1,7 @@
 """Typed exceptions shared by every layer; the ROS edge turns them into messages."""
 
+from typing import Any
+
 
 class DriveBridgeError(Exception):
     """Base class of every error raised by drive_bridge."""
@@ -116,7 +118,15 @@ class CommandExpired(CommandRefused):
 
 
 class ReadBackMismatch(DriveBridgeError):
-    """A parameter written reads back another value: the device holds that one."""
+    """A parameter written reads back another value: the device holds that one (``read``)."""
+
+    def __init__(self, message: str, read: Any = None):
+        super().__init__(message)
+        self.read = read
+
+
+class ReadBackFailed(DriveBridgeError):
+    """A parameter was written (acknowledged), but reading it back failed: the value is unsure."""
 
 
 class ModelMismatch(DriveBridgeError):

@@ -1,8 +1,10 @@
 """
 Jobs: the work that goes before polls, each with a deadline, stops first.
 
-A job is a command, a parameter access, a device's set-up writes or the stop of everything
-at deactivate and shutdown. Its future is resolved exactly once. A job that has not reached
+A job is a command, a parameter access (a function of the device's
+:class:`~drive_bridge.devices.parameter_service.ParameterService`, run on the bus thread:
+:mod:`.parameter_line`), a device's set-up writes or the stop of everything at deactivate and
+shutdown. Its future is resolved exactly once. A job that has not reached
 the wire by its deadline is dropped and answered as failed, and is then never sent: the
 bus marks a job running (``Future.set_running_or_notify_cancel``) just before its first
 write, so a caller that gave up and cancelled it wins or loses that race atomically.
@@ -13,10 +15,10 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field
 import math
 import threading
-from typing import Callable, Deque, List, Optional, Tuple
+from typing import Any, Callable, Deque, List, Optional, Tuple
 
 from drive_bridge.bus.device import BusDevice
-from drive_bridge.devices.contracts import ParameterPlan, SetupWrites
+from drive_bridge.devices.contracts import SetupWrites
 from drive_bridge.errors import CommandExpired, CommandRefused
 from drive_bridge.protocol.commands import Command
 from drive_bridge.protocol.requests import Request
@@ -58,14 +60,21 @@ class CommandJob(Job):
 
 
 @dataclass
-class ParameterJob(Job):
-    """A parameter read or write."""
+class ParameterServiceJob(Job):
+    """
+    A parameter access: ``action`` is given the device's ParameterService on the bus thread.
 
-    plan: Optional[ParameterPlan] = None
+    Its result (or what it raises) resolves the future. It runs between two transactions of
+    the bus, and its transactions go back to back; it must do nothing but use the service
+    (no waiting of its own).
+    """
+
+    action: Optional[Callable[[Any], Any]] = None
+    label: str = 'parameter access'
 
     def describe(self) -> str:
         """Return the access in words."""
-        return self.plan.label if self.plan else 'parameter'
+        return self.label
 
 
 @dataclass

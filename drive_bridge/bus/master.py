@@ -8,6 +8,7 @@ needs through the interfaces in :mod:`.seams`; every part has one job:
 - :mod:`.table`: the devices, the lock over their state, snapshots for other threads;
 - :mod:`.outbox`: events (:mod:`.events`) in order, given to the listener later;
 - :mod:`.intake`: callers' commands and parameter accesses, admitted, with a deadline;
+- :mod:`.parameter_line`: each device's parameter service over the bus (the CLI's);
 - :mod:`.jobs`: the job queue (stops first, a stop overtaking starts, deadlines);
 - :mod:`.scheduler`: the scheduling step, one transaction or none (see there);
 - :mod:`.polling` and :mod:`.health`: poll cycles step by step, and device health;
@@ -23,7 +24,7 @@ from concurrent.futures import Future
 import math
 import threading
 import time
-from typing import Any, Callable, List, Mapping, Optional, Union
+from typing import Any, Callable, List, Mapping, Optional, TypeVar, Union
 
 from drive_bridge.bus.controls import DeviceControls
 from drive_bridge.bus.deadman import Deadman
@@ -42,10 +43,13 @@ from drive_bridge.bus.table import DeviceSnapshot, DeviceTable
 from drive_bridge.bus.timing import BusTiming
 from drive_bridge.bus.work import JobRunner
 from drive_bridge.devices.contracts import ParameterOptions
+from drive_bridge.devices.parameter_service import ParameterService
 from drive_bridge.protocol.commands import Command
 from drive_bridge.transport.base import Transport
 
 __all__ = ['BusEvent', 'BusMaster', 'BusTiming', 'DeviceSnapshot', 'DeviceSpec']
+
+T = TypeVar('T')
 
 
 class BusMaster:
@@ -123,6 +127,21 @@ class BusMaster:
         """
         return self._intake.command(name, command, deadline_s)
 
+    def run_parameter_service(self, name: str, action: Callable[[ParameterService], T],
+                              deadline_s: Optional[float] = None,
+                              label: str = 'parameter access') -> 'Future[T]':
+        """
+        Queue ``action(service)`` on the bus thread; the future gives what it returns.
+
+        ``service`` is device ``name``'s ParameterService over the bus (between two polls;
+        its transactions back to back; see :mod:`.parameter_line`): e.g. ``lambda service:
+        service.write(341, 2.5)`` checks, writes and reads back. Refused at once (nothing
+        sent) without parameter access, while the device is offline or the link down. Not
+        begun ``deadline_s`` from now (default: the command deadline and one transaction):
+        never begun. ``action`` must only use the service: it runs on the bus thread.
+        """
+        return self._intake.parameter_service(name, action, deadline_s, label)
+
     def read_parameter(self, name: str, number: int,
                        options: ParameterOptions = ParameterOptions()) -> Future:
         """Queue a read of parameter ``number``; the future gives its value."""
@@ -130,7 +149,7 @@ class BusMaster:
 
     def write_parameter(self, name: str, number: int, value: Any,
                         options: ParameterOptions = ParameterOptions()) -> Future:
-        """Queue a write of parameter ``number``; the future resolves on acknowledgement."""
+        """Queue a write of ``number`` (no read-back); the future resolves on acknowledgement."""
         return self._intake.parameter(name, number, value, options)
 
     def set_speed_reference(self, name: str, percent: float, from_topic: bool = False) -> int:

@@ -2,20 +2,22 @@
 The job runner: each job to the part that carries it out, on the bus thread.
 
 Commands and the stop of everything go to the :class:`~drive_bridge.bus.execution.
-CommandExecutor`; parameter accesses and set-up writes are run here. While the link is down
-nothing can be sent, and every job is answered at once (:meth:`JobRunner.run_while_down`).
+CommandExecutor`; parameter accesses to the device's parameter service on the bus
+(:class:`~drive_bridge.bus.parameter_line.ParameterLines`); set-up writes are run here.
+While the link is down nothing can be sent, and every job is answered at once
+(:meth:`JobRunner.run_while_down`).
 """
 
 from typing import Callable
 
 from drive_bridge.bus.events import Notice
 from drive_bridge.bus.execution import CommandExecutor
-from drive_bridge.bus.jobs import CommandJob, fail, Job, ParameterJob, SetupJob, StopAllJob
-from drive_bridge.bus.runner import DECODE_ERRORS
+from drive_bridge.bus.jobs import CommandJob, fail, Job, ParameterServiceJob, SetupJob, StopAllJob
+from drive_bridge.bus.parameter_line import ParameterLines
 from drive_bridge.bus.seams import EventSink, LinkState, Transactions
 from drive_bridge.bus.table import DeviceTable
 from drive_bridge.errors import (
-    CommandRefused, DeviceException, LinkDown, MonitorOnly, ProtocolError, TransportError)
+    CommandRefused, DeviceException, LinkDown, MonitorOnly, TransportError)
 
 SETUP_RETRY_S = 1.0  # a set-up write whose reply was lost is sent again after this pause
 
@@ -31,11 +33,12 @@ class JobRunner:
         self.link = link
         self.events = events
         self.clock = clock
+        self.parameters = ParameterLines(runner, link)
 
     def run(self, job: Job) -> None:
         """Carry out ``job`` now."""
         handlers = {CommandJob: self.commands.run, StopAllJob: self.commands.stop_all,
-                    ParameterJob: self._run_parameters, SetupJob: self._run_setup}
+                    ParameterServiceJob: self.parameters.run, SetupJob: self._run_setup}
         handlers[type(job)](job)
 
     def run_while_down(self, job: Job) -> None:
@@ -44,29 +47,6 @@ class JobRunner:
             self.commands.stop_all(job)  # each motor that may run: NOT STOPPED, with the reason
         else:
             fail(job, CommandRefused(f'{self.link.error}: nothing sent'))
-
-    def _run_parameters(self, job: ParameterJob) -> None:
-        if not job.future.set_running_or_notify_cancel():
-            return
-        device = job.device
-        results: list = []
-        try:
-            for request in job.plan.transactions:
-                results.append(self.runner.transact(device, request))
-        except DeviceException as error:
-            job.future.set_exception(CommandRefused(
-                f'rejected by {device.name}: {self.runner.explain(device, error)}'))
-            return
-        except (TransportError, MonitorOnly) as error:
-            if isinstance(error, LinkDown):
-                self.link.lost(str(error))
-            job.future.set_exception(error)
-            return
-        try:
-            job.future.set_result(job.plan.decode(results))
-        except DECODE_ERRORS as error:
-            job.future.set_exception(ProtocolError(f'{job.plan.label}: cannot decode the '
-                                                   f'reply: {error}'))
 
     def _run_setup(self, job: SetupJob) -> None:
         """Send the set-up writes (drives: their comms timeout) each time a device is back."""

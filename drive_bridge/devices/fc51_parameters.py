@@ -8,7 +8,8 @@ Sources, in order of weight:
   (worked frames: PNU 342 read as two registers, PNU 3 written as one, PNU 734 written as
   two with 65535 = 655.35 s), 5.6 (parameters the control word refers to), 6.2.1 (1-24
   has conversion index -2), 6.2.2/6.2.4 (what "change during operation" and the types mean),
-  7.1.1 (16-90/16-92/16-94 bit tables);
+  7.1.1 (16-90/16-92/16-94 bit tables), the specifications ("Ramp times 0.05 - 3600 sec.":
+  the range of 3-81 as of 3-41/3-42);
 - ``shared/research/protocols.md`` "FC-series parameters" (readouts 15-xx/16-xx with their
   type, conversion index and a confirmed/inferred/open status);
 - :mod:`drive_bridge.devices.fc51` (the bridge's own entries; same type and conversion here);
@@ -136,7 +137,9 @@ FC51_TABLE: Tuple[ParameterSpec, ...] = (
        M4_QM1 + '; manual 004 example 5.5.4 reads it as two registers (32 bits)',
        inferred=('conversion',), minimum=0.05, maximum=3600.0, unit='s', default=3.0),
     _p(381, 'Quick Stop Ramp Time', 'uint32', -2,
-       'manual 004 section 5.6.2 (control word bit 04); type and index as in fc.py'),
+       'manual 004 section 5.6.2 (control word bit 04); range: manual 004 specifications, '
+       '"Ramp times 0.05 - 3600 sec." (as 3-41/3-42); type and index as in fc.py',
+       minimum=0.05, maximum=3600.0, unit='s'),
     # -- 4-** Limits/Warnings
     _p(412, 'Motor Speed Low Limit [Hz]', 'uint16', -1, M4_QM2, minimum=0.0, maximum=400.0,
        unit='Hz'),

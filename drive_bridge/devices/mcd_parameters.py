@@ -59,6 +59,9 @@ class McdParameter:
     setting: bool = True
     aliases: Tuple[str, ...] = ()  # other editions' designations ('1A' for '1-1')
     inferred: Tuple[str, ...] = ()
+    # Keeps the starter on the network (ParameterSpec.serial_line): read-only from ROS, never
+    # written by a restore.
+    serial_line: bool = False
 
     def __post_init__(self):
         if self.options is not None:
@@ -77,7 +80,7 @@ class McdParameter:
             self.serial_number or 0, self.name, 'uint16', 0, source=self.source,
             minimum=self.minimum, maximum=self.maximum, options=self.options,
             options_partial=self.options_partial, unit=self.unit, setting=self.setting,
-            default=self.default, label=self.designation,
+            default=self.default, label=self.designation, serial_line=self.serial_line,
             inferred=tuple(name for name in self.inferred if name != 'serial_number'))
 
 
@@ -99,10 +102,12 @@ MCD500: Tuple[McdParameter, ...] = (
 )
 
 MCD3000: Tuple[McdParameter, ...] = (
-    McdParameter('mcd3000', '20', '(local/remote control)', M0 + ' section 11.7: set 20 = 2 '
-                 '(local operation only) for the Remote Operator', serial_number=20,
+    McdParameter('mcd3000', '20', '(local/remote control)', M0 + ' section 11.7: "to operate '
+                 'correctly on the network, the MCD 3000 must be set for local operation only '
+                 '(i.e. set Parameter 20 = 2)": another value takes the starter, and its stop, '
+                 'off the network', serial_number=20,
                  options={2: 'Local operation only'}, options_partial=True,
-                 inferred=('serial_number', 'name')),
+                 inferred=('serial_number', 'name'), serial_line=True),
     McdParameter('mcd3000', '24', 'Serial Timeout', M0 + ' section 11.7 (starter to Remote '
                  'Operator link)', serial_number=24, inferred=('serial_number',)),
     McdParameter('mcd3000', '60', 'Min Run Frequency', M0 + ' section 6: the last MCD 3000 '

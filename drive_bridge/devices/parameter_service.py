@@ -14,23 +14,27 @@ for any device of a bus):
 ``run(requests, doing)``
     Run the requests in order for this device and return their results; ``doing`` says
     what they are for (``par. 3-41 ...``), for the line's own failure words. Whatever it
-    raises passes through the service unchanged (the CLI's line raises its own errors; a
-    node's would raise the project's, :mod:`drive_bridge.errors`).
+    raises passes through the service unchanged, but in a write's read back (the project's
+    errors there: ReadBackFailed) (the CLI's line raises its own errors; a
+    bus's raises the project's, :mod:`drive_bridge.errors`:
+    :class:`drive_bridge.bus.parameter_line.BusDeviceLine`, the node's way).
 ``check_before_writing()``
     Called before every plan that writes, before anything of it is sent: raise if the
     device at the address must not be written (the CLI asks what answers there, once,
-    with reads only; a node whose polls know the device may do nothing).
+    with reads only; the bus, whose polls know the device, does nothing).
 ``resolve_model()``
     Return the device's model, with model ``auto`` learned from the device first (the CLI
-    polls once; a node answers from its polls, or raises until the first one). The tables
+    polls once; the bus answers from its polls, or raises until the first one). The tables
     depend on it.
 
 The service raises the project's errors: :class:`~drive_bridge.errors.CommandRefused` for
 what it refuses before sending (no parameter access, a number or value that does not fit,
 :class:`~drive_bridge.errors.MonitorOnly`), :class:`~drive_bridge.errors.ProtocolError`
 for a reply that does not decode, :class:`~drive_bridge.errors.ReadBackMismatch` for a
-written value that reads back different. A caller turns them into its own words (the CLI
-prints them in one line, with its exit codes).
+written value that reads back different (with the value read),
+:class:`~drive_bridge.errors.ReadBackFailed` for a written value whose read back failed. A
+caller turns them into its own words (the CLI prints them in one line, with its exit codes;
+the node answers the set with them).
 
 Use: ``service = ParameterService(name, profile, line)``; ``service.table()`` lists the
 tabled parameters (PNU -> :class:`~drive_bridge.devices.parameters.ParameterSpec`);
@@ -50,7 +54,8 @@ from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import DeviceProfile, ParameterAccess, ParameterOptions
 from drive_bridge.devices.fc_profile_drive import FcProfileDrive
 from drive_bridge.devices.parameters import check_value, ParameterSpec, Value
-from drive_bridge.errors import CommandRefused, MonitorOnly, ProtocolError, ReadBackMismatch
+from drive_bridge.errors import (
+    CommandRefused, DriveBridgeError, MonitorOnly, ProtocolError, ReadBackFailed, ReadBackMismatch)
 from drive_bridge.protocol.requests import Request
 
 
@@ -149,7 +154,8 @@ class ParameterService:
         The value is checked first against the table's entry (type, limits, options; a
         number the table lacks is left to the profile): CommandRefused, nothing sent. It
         goes to RAM, or to EEPROM as well with ``options.eeprom``. ReadBackMismatch when the
-        device reads back another value.
+        device reads back another value (its ``read``), ReadBackFailed when the read back fails
+        with one of the project's errors (the line's own errors pass unchanged).
         """
         spec = self.spec(number, options)
         if spec is not None:
@@ -157,10 +163,14 @@ class ParameterService:
             if reason:
                 raise CommandRefused(f'{reason}: nothing written')
         self.transfer(number, value, options)
-        read = self.read(number, replace(options, eeprom=False))
+        try:
+            read = self.read(number, replace(options, eeprom=False))
+        except DriveBridgeError as error:
+            raise ReadBackFailed(f'{self.label(number)}: written, but the read back failed: '
+                                 f'{error}') from error
         if not info.same_value(value, read):
             raise ReadBackMismatch(f'{self.label(number)}: wrote {value!r}, but it reads back '
-                                   f'{read!r}')
+                                   f'{read!r}', read)
         return read
 
     def transfer(self, number: int, value: Optional[Value] = None,
@@ -176,7 +186,7 @@ class ParameterService:
         self.line.resolve_model()  # model auto: the parameter map depends on what it is
         plan = profile.parameter_plan(number, value, options)
         if any(request.writes for request in plan.transactions):
-            if not self.line.writes_allowed:  # as the node: nothing of the plan sent
+            if not self.line.writes_allowed:  # nothing of the plan sent, from any caller
                 raise MonitorOnly(f'{self.name} is monitor only (allow_control: false): '
                                   f'{plan.label} not sent')
             self.line.check_before_writing()  # e.g. a VLT text parameter's index write (IND)

@@ -71,8 +71,9 @@ class ParameterSpec:
     elements: int = 0  # array parameters: how many indexes (0: not an array)
     label: str = ''  # the manual's own designation when it is not the number (FC: 16-14)
     inferred: Tuple[str, ...] = ()  # names of the fields no source states
-    # A setting of the drive's own serial line (protocol, address, baud rate, parity): backed
-    # up and compared on restore, never written by it (that would cut the drive off the line).
+    # A setting of the drive's own serial line (protocol, address, baud rate, parity), or one
+    # that keeps the device on the network (MCD 3000 par. 20): backed up and compared on
+    # restore, never written by it (that would cut the device off the line).
     serial_line: bool = False
 
     def __post_init__(self):
@@ -141,6 +142,9 @@ def encode_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -
         if len(value) > spec.characters:
             raise CommandRefused(f'{spec.name}: {value!r} is longer than {spec.characters} '
                                  'characters')
+        reason = text_refusal(value)
+        if reason:
+            raise CommandRefused(f'{spec.name}: {reason}')
         try:  # as many registers as the text needs, an odd length filled with a space
             return text_to_registers(value, len(value) + len(value) % 2)
         except (ValueError, UnicodeEncodeError) as error:
@@ -149,6 +153,23 @@ def encode_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -
     if DATA_TYPES[spec.data_type][0] == 2:
         return list(split_u32(raw & 0xFFFFFFFF))
     return [raw & 0xFFFF]
+
+
+def text_refusal(text: str) -> str:
+    """
+    Return why a device cannot store ``text`` ('' when it can).
+
+    A text parameter holds one byte a character (Latin-1, as :func:`~drive_bridge.protocol.
+    words.registers_to_text` reads it back) and ends at a NUL (the device keeps what is before
+    it). So a character must be U+0001 to U+00FF.
+    """
+    refused = sorted({character for character in text if not 0 < ord(character) <= 0xFF})
+    if not refused:
+        return ''
+    shown = ', '.join(repr(character) for character in refused[:5])
+    more = f' and {len(refused) - 5} more' if len(refused) > 5 else ''
+    return f'{text!r} has characters a device cannot store ({shown}{more}): text takes ' \
+        'Latin-1 characters (U+0001 to U+00FF), one byte each, no NUL'
 
 
 def raw_number(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -> int:
@@ -193,7 +214,8 @@ def check_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) ->
             return f'{spec.title} is a text parameter: {value!r} is not text'
         if len(value) > spec.characters:
             return f'{spec.title}: {value!r} is longer than {spec.characters} characters'
-        return None
+        reason = text_refusal(value)
+        return f'{spec.title}: {reason}' if reason else None
     try:
         raw_number(spec, value, factors)
     except CommandRefused as error:

@@ -69,8 +69,11 @@ def test_types_ranges_and_read_only_from_the_table():
         (DOUBLE_KIND, 0.05, 3600.0, '')
     frequency = fc['p1_23_motor_frequency']
     assert (frequency.kind, frequency.minimum, frequency.maximum) == (INTEGER_KIND, 20, 400)
-    quick_stop = fc['p3_81_quick_stop_ramp_time']  # no limits: the data type's, converted
-    assert quick_stop.minimum == 0 and quick_stop.maximum == pytest.approx(0xFFFFFFFF * 0.01)
+    quick_stop = fc['p3_81_quick_stop_ramp_time']  # manual 004: ramp times 0.05-3600 s
+    assert (quick_stop.kind, quick_stop.minimum, quick_stop.maximum) == (DOUBLE_KIND, 0.05, 3600.0)
+    current = fc['p16_14_motor_current']  # no limits: the data type's (int32), converted
+    assert current.minimum == pytest.approx(-0x80000000 * 0.01) and \
+        current.maximum == pytest.approx(0x7FFFFFFF * 0.01)
     assert 'readout' in fc['p16_14_motor_current'].read_only
     assert 'serial-line' in fc['p8_32_baud_rate'].read_only
     assert fc['p15_40_fc_type'].kind == TEXT_KIND

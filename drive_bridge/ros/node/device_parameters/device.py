@@ -3,9 +3,12 @@ One device's parameters on the bus: the table as ROS sees it, the values read, b
 
 :class:`DeviceParameters` knows the device's remote parameters (by ROS name), holds their
 values as last read (:class:`~drive_bridge.ros.node.device_parameters.cache.ValueCache`) and
-queues reads and writes on the bus (``BusMaster.read_parameter``/``write_parameter``: the
-bus thread runs them between transactions; nothing here waits for the bus). A read's value
-is stored, and a change announced (``on_change``), on the bus thread.
+queues reads and writes on the bus as functions of the device's
+:class:`~drive_bridge.devices.parameter_service.ParameterService` (the CLI's: the table's
+check, the monitor-only refusal, the write and its read back), which the bus thread runs
+between its transactions (``BusMaster.run_parameter_service``; nothing here waits for the
+bus). A value read (also a write's read back) is stored, and a change announced
+(``on_change``), on the bus thread.
 
 The table is the CLI's (:func:`~drive_bridge.devices.parameter_info.parameter_table`) for
 the configured model; with model ``auto`` and a family whose table depends on the model
@@ -22,6 +25,7 @@ from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.contracts import ParameterAccess, ParameterOptions
 from drive_bridge.devices.fc_profile_drive import FcProfileDrive
 from drive_bridge.devices.remote_parameters import remote_parameters, RemoteParameter
+from drive_bridge.errors import ReadBackMismatch
 from drive_bridge.ros.node.device_parameters.cache import ValueCache
 
 
@@ -95,14 +99,38 @@ class DeviceParameters:
 
     def read(self, parameter: RemoteParameter) -> Future:
         """Queue a read; its value is stored (and a change announced) when it comes."""
-        future = self.bus.read_parameter(self.name, parameter.number)
+        number = parameter.number
+        future = self.bus.run_parameter_service(
+            self.name, lambda service: service.read(number), label=f'read {parameter.name}')
         future.add_done_callback(lambda done: self._store(parameter, done))
         return future
 
     def write(self, parameter: RemoteParameter, value: Any, eeprom: bool) -> Future:
-        """Queue a write of ``value`` (display units), to RAM or (drives) RAM and EEPROM."""
+        """
+        Queue a write of ``value`` (display units), to RAM or (drives) RAM and EEPROM.
+
+        The device's ParameterService on the bus checks it against the table, refuses it on
+        a monitor-only device (nothing sent), writes it and reads it back; the future gives
+        the value read back, or raises (ReadBackMismatch: the device holds another value,
+        which is stored as read).
+        """
+        number = parameter.number
         options = ParameterOptions(eeprom=eeprom and self.eeprom)
-        return self.bus.write_parameter(self.name, parameter.number, value, options)
+        future = self.bus.run_parameter_service(
+            self.name, lambda service: service.write(number, value, options),
+            label=f'write {parameter.name}')
+        future.add_done_callback(lambda done: self._store_written(parameter, done))
+        return future
+
+    def _store_written(self, parameter: RemoteParameter, done: Future) -> None:
+        """Keep the value a write read back, also one that differs (bus thread)."""
+        if done.cancelled():
+            return
+        error = done.exception()
+        if error is None:
+            self._keep(parameter, done.result())
+        elif isinstance(error, ReadBackMismatch) and error.read is not None:
+            self._keep(parameter, error.read)
 
     def _store(self, parameter: RemoteParameter, done: Future) -> None:
         """Keep a value read (bus thread); announce it if it changed."""
@@ -113,9 +141,18 @@ class DeviceParameters:
             if str(error).startswith('rejected by'):  # the device's own refusal
                 self.cache.refused(parameter.number, str(error))
             return
-        value = info.display_value(parameter.spec, done.result(), self.factors)
-        if isinstance(value, str):
-            value = value.rstrip(' ')
+        self._keep(parameter, done.result())
+
+    def _keep(self, parameter: RemoteParameter, read: Any) -> None:
+        """Store a value read (bus thread); announce it if it changed."""
+        value = self.shown(parameter, read)
         before = self.cache.store(parameter.number, value)
         if before is not None and not info.same_value(before, value):
             self._on_change(parameter, value)
+
+    def shown(self, parameter: RemoteParameter, read: Any) -> Any:
+        """Return a value as read, as the node shows it (the spec's resolution, no padding)."""
+        value = info.display_value(parameter.spec, read, self.factors)
+        if isinstance(value, str):
+            value = value.rstrip(' ')
+        return value

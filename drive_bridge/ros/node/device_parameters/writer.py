@@ -8,11 +8,15 @@ when the value is the one it holds (so a ``ros2 param dump`` loads back), else r
 value that could run a motor (:func:`~drive_bridge.devices.remote_parameters.
 write_refusal`); the table's check (range, resolution, options; as ``drive-bridge set``); a
 node that is not active or is closing its bus; a monitor-only device (``allow_control``
-false, as the bus has it now): refused here, before anything is queued (the bus refuses it
-again). Then the write is queued on the bus (RAM, or RAM and EEPROM with the node's
-``save_to_eeprom``), awaited, and the value read back; the answer is the device's own
-refusal in words (FC 51: ``rejected by conv: ... not possible in the present mode``) or
-the value read back. After a write, or a refusal, the value the device holds goes out on
+false, as the bus has it now): refused here, before anything is queued. Then the write
+goes to the bus as one job of the device's
+:class:`~drive_bridge.devices.parameter_service.ParameterService` (the CLI's ``set``: the
+table's check and the monitor-only refusal again, before anything is sent; the write, RAM,
+or RAM and EEPROM with the node's ``save_to_eeprom``; its read back, with no other
+transaction between them), and awaited; the answer is the device's own refusal in words
+(FC 51: ``rejected by conv: ... not possible in the present mode``), a value that reads
+back different, a read back that failed (``written, but the read back failed``), or
+success. After a write, or a refusal, the value the device holds goes out on
 ``/parameter_events`` so that an editor (rqt_reconfigure) shows it.
 """
 
@@ -21,7 +25,7 @@ from typing import Any, Callable, Optional
 from drive_bridge.devices import parameter_info as info
 from drive_bridge.devices.parameters import check_value
 from drive_bridge.devices.remote_parameters import RemoteParameter, typed_value, write_refusal
-from drive_bridge.errors import DriveBridgeError
+from drive_bridge.errors import DriveBridgeError, ReadBackMismatch
 from drive_bridge.ros.node.device_parameters.device import DeviceParameters
 from drive_bridge.ros.node.gate import CommandGate
 from drive_bridge.ros.node.service_calls import ServiceCalls
@@ -94,22 +98,17 @@ class DeviceWriter:
         return ''
 
     async def _write(self, parameter: RemoteParameter, value: Any) -> str:
-        """Write, then read back; return '' or why the value is not the one written."""
+        """Write and read back (one job of the bus); return '' or why it is not written."""
         name = parameter.name
         try:
-            await self._calls.answer_of(self._device.write(parameter, value, self._eeprom()),
-                                        f'write {name}', self._give_up_s)
+            written = self._device.write(parameter, value, self._eeprom())
+            read = await self._calls.answer_of(written, f'write {name}', self._give_up_s)
+        except ReadBackMismatch as error:
+            held = self._device.shown(parameter, error.read)
+            return f'{name}: wrote {value!r}, but it reads back {held!r}'
         except DriveBridgeError as error:
             return f'{name}: {error}'
-        try:
-            read = await self._calls.answer_of(self._device.read(parameter),
-                                               f'read back {name}', self._give_up_s)
-        except DriveBridgeError as error:
-            return f'{name}: written, but the read back failed: {error}'
-        read = info.display_value(parameter.spec, read, self._device.factors)
-        if not info.same_value(value, read):
-            return f'{name}: wrote {value!r}, but it reads back {read!r}'
-        self._announce(parameter, read)
+        self._announce(parameter, self._device.shown(parameter, read))
         return ''
 
     async def _announce_held(self, parameter: RemoteParameter) -> None:
