@@ -165,6 +165,11 @@ class SharedRigs:
         else:
             self._end(session)
 
+    def fresh(self, rig, path, **bus: Any) -> Session:
+        """Return a node of its own on ``rig`` (a Session, for ``with``); shared ones end first."""
+        self.close()
+        return Session(rig, path, **bus)
+
     @staticmethod
     def _reuse(session: Session) -> str:
         if session.process.poll() is not None:

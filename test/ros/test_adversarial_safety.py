@@ -707,10 +707,11 @@ def mcd_start_frames(server, unit: int) -> int:
 
 
 @pytest.mark.parametrize('round_', range(3))
-@pytest.mark.parametrize('when', ['offline', 'just_silent'])
-@pytest.mark.parametrize('family', [
-    on_rig(f'outage_{family}', family) for family in ('mcd', 'fc')])
-def test_start_asked_during_an_outage_as_the_device_comes_back(family, when, round_, rigs):
+@pytest.mark.parametrize('family, when', [
+    *(on_rig(f'outage_{family}', family, 'offline') for family in ('mcd', 'fc')),
+    *((family, 'just_silent') for family in ('mcd', 'fc'))])
+def test_start_asked_during_an_outage_as_the_device_comes_back(
+        family, when, round_, rigs, tmp_path):
     """
     A start asked for in an outage; the device answers again 0-0.6 s later.
 
@@ -718,9 +719,18 @@ def test_start_asked_during_an_outage_as_the_device_comes_back(family, when, rou
     gone silent, the node does not know yet (the start goes out and gets no reply; the
     silent device does not execute it). A start answered as failed never reaches the device
     later, and none is sent twice.
+
+    ``just_silent`` runs on a node of its own: on a shared node its timing changed (a start
+    of round 1 on the FC 51 reached the device after its silence, and its acknowledgement was
+    refused as one that could be owed to an earlier write: "may or may not have been
+    executed"), which is not the case this test describes.
     """
     chance = random.Random(10 + round_)
-    with rigs.session(family, **OUTAGE_BUS) as session:
+    if when == 'offline':
+        node = rigs.session(family, **OUTAGE_BUS)
+    else:
+        node = rigs.fresh(make_rig(family), tmp_path / 'comeback.yaml', **OUTAGE_BUS)
+    with node as session:
         client, rig = session.client, session.rig
         server, probe = rig.server, rig.probe
         assert client.wait_state(rig.name, 'ready', READY_S)
