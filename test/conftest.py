@@ -30,7 +30,7 @@ LONGEST_FIRST = (
     'test/ros/test_ctl.py',  # 94 s in 26 tests, module node
     'test/ros/test_joints_node.py',  # 51 s in 12 tests, module node
     'test/ros/test_safety_cases.py',  # 110 s in 16 tests
-    'test/ros/test_adversarial_safety.py',  # 240 s in 65 tests, each with a node of its own
+    'test/ros/test_adversarial_safety.py',  # 210 s in 65 tests, 30 of them on shared nodes
     'test/integration/test_reconnect.py',  # realtime: 16, 11, 11 s
     'test/integration/test_safety_bus.py',  # the babbling lines, one xdist group: 45 s
     'test/integration/test_fc_protocol_sim.py::test_random_faults',  # 19 s

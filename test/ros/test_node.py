@@ -38,6 +38,11 @@ def node(sim, tmp_path_factory):
                       {'port': sim.pty_path, 'parity': 'N', 'timeout': 0.2,
                        'backoff_max': 2.0, 'diagnostics_period': 0.5}, DEVICES,
                       ready=['main']) as client:
+        # At rest before the first test: until 'dead' is offline each of its polls holds the
+        # line for three attempts (timeout 0.2 s + the 0.1 s guard each), about 0.9 s, longer
+        # than the 0.6 s the soft start's current stays above 300 A; a start sent then saw
+        # no reading of the peak (a fresh-clone CI run). Offline, a probe holds it 0.3 s.
+        assert client.wait_state('dead', 'offline', 15.0)
         yield client
 
 
@@ -46,7 +51,8 @@ def test_start_running_then_stop_ready(node, sim):
     assert response.success, response.message
     assert response.message == 'start acknowledged by main (address 20)'
     assert node.wait_state('main', 'running')
-    assert node.spin_until(lambda: max(node.values('main', 'motor_current')) > 300)
+    assert node.spin_until(lambda: max(node.values('main', 'motor_current')) > 300), \
+        node.values('main', 'motor_current')
     assert node.call('main', 'stop').success
     assert node.wait_state('main', 'ready')
     states = node.values('main', 'state')

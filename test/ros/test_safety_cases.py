@@ -22,6 +22,7 @@ from safety_helpers import (
 from safety_ros import (
     call_later, call_ok, clean_exit, diagnostics_seen, level_is, Lifecycle, make_mixed_rig,
     make_rig, READY_S, Session, status_values)
+from shared_rigs import on_rig
 
 REFERENCE_TIMEOUT_S = 3.0
 
@@ -159,13 +160,12 @@ def test_babbling_line_never_lets_a_failed_start_out_later(tmp_path):
 
 
 # -- case 7: a tripped drive and its keepalive ----------------------------------------------
-@pytest.mark.parametrize('family', ['fc', 'vlt'])
-def test_trip_ends_the_run_and_a_reset_at_the_drive_does_not_restart(family, tmp_path):
+@pytest.mark.parametrize('family', [on_rig(family, family) for family in ('fc', 'vlt')])
+def test_trip_ends_the_run_and_a_reset_at_the_drive_does_not_restart(family, rigs):
     """Case 7: after a trip the drive gets a stop word; an LCP reset does not restart it."""
-    rig = make_rig(family)
-    probe, model, server = rig.probe, rig.probe.model, rig.server
-    with Session(rig, tmp_path / 'trip.yaml') as session:
-        client = session.client
+    with rigs.session(family) as session:
+        client, rig = session.client, session.rig
+        probe, model, server = rig.probe, rig.probe.model, rig.server
         assert client.wait_state(rig.name, 'ready', READY_S)
         assert client.call(rig.name, 'start').success
         assert client.wait_state(rig.name, 'running', 10.0)

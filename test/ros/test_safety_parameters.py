@@ -12,6 +12,7 @@ from safety_helpers import frames_to, MCD_START, MCD_STOP, recorded, ReplyHold, 
     write_frames
 from safety_ros import (
     call_later, call_ok, get_parameters, make_rig, READY_S, Session, set_atomically)
+from shared_rigs import on_rig
 
 
 def more_frames(rig, count: int, timeout_s: float = 20.0) -> bool:
@@ -22,12 +23,11 @@ def more_frames(rig, count: int, timeout_s: float = 20.0) -> bool:
 
 
 # -- case 5: runtime allow_control false on a running motor ---------------------------------
-@pytest.mark.parametrize('family', ['fc', 'mcd', 'lvsg'])
-def test_monitor_only_refused_while_running_then_nothing_written(family, tmp_path):
+@pytest.mark.parametrize('family', [on_rig(family, family) for family in ('fc', 'mcd', 'lvsg')])
+def test_monitor_only_refused_while_running_then_nothing_written(family, rigs):
     """Case 5: allow_control false refused while a run is held; after a stop, no writes."""
-    rig = make_rig(family)
-    with Session(rig, tmp_path / 'monitor.yaml') as session:
-        client = session.client
+    with rigs.session(family) as session:
+        client, rig = session.client, session.rig
         name = rig.name
         assert client.wait_state(name, 'ready', READY_S)
         assert client.call(name, 'start').success
