@@ -29,8 +29,8 @@ import sys
 import threading
 from typing import Optional
 
-import rclpy
-from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from drive_bridge.ros.node.spin_loop import spin_until_stopped
+from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
 
 THREAD_NAME = 'ros-commands'
@@ -87,13 +87,5 @@ class CommandsThread:
 
     def _spin(self) -> None:
         """Spin until :meth:`stop`; a context shut down under the executor ends it quietly."""
-        while not self._stop.is_set():
-            try:
-                self.executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
-            except (ExternalShutdownException, KeyboardInterrupt):
-                return
-            except Exception as error:  # noqa: B902 - a callback's bug must not end the thread
-                if self._stop.is_set() or not rclpy.ok(context=self._node.context):
-                    return
-                print(f'[drive_bridge] {THREAD_NAME}: {type(error).__name__}: {error}',
-                      file=sys.stderr, flush=True)
+        spin_until_stopped(self.executor, self._stop, self._node.context, THREAD_NAME,
+                           SPIN_TIMEOUT_S)

@@ -9,7 +9,6 @@ and the bridge's services and timers cost these nothing. Their callbacks are cor
 await the bus (never block on it), so one slow write holds up no get.
 """
 
-import sys
 import threading
 from typing import Dict, List, Optional
 
@@ -18,8 +17,8 @@ from drive_bridge.config import model as cfg
 from drive_bridge.ros.node.device_parameters.device import has_parameters
 from drive_bridge.ros.node.device_parameters.device_node import DeviceParameterNode
 from drive_bridge.ros.node.gate import CommandGate
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from drive_bridge.ros.node.spin_loop import spin_until_stopped
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
 THREAD_NAME = 'ros-parameters'
@@ -75,13 +74,5 @@ class DeviceParameterNodes:
         self._executor.shutdown(timeout_sec=0.0)
 
     def _spin(self) -> None:
-        while not self._stop.is_set():
-            try:
-                self._executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
-            except (ExternalShutdownException, KeyboardInterrupt):
-                return
-            except Exception as error:  # noqa: B902 - a callback's bug must not end the thread
-                if self._stop.is_set() or not rclpy.ok(context=self._context):
-                    return
-                print(f'[drive_bridge] {THREAD_NAME}: {type(error).__name__}: {error}',
-                      file=sys.stderr, flush=True)
+        spin_until_stopped(self._executor, self._stop, self._context, THREAD_NAME,
+                           SPIN_TIMEOUT_S)
