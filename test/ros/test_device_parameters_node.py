@@ -41,8 +41,9 @@ WRITE_FUNCTIONS = (5, 6, 15, 16)
 READ_REGISTERS = 3
 WRITE_COILS = 15
 NOT_SET = ParameterType.PARAMETER_NOT_SET
-# The env.sh of a ros2 CLI built by ../shared/tools/ros2_tools.sh; opt-in: each ros2 call
-# costs seconds of CPU (about 90 s for the test on a busy 2-core machine).
+# A file that puts ros2 on the path (/opt/ros/jazzy/setup.bash, or the env.sh of a ros2 CLI
+# built from its jazzy sources); opt-in: each ros2 call costs seconds of CPU (about 90 s for
+# the test on a busy 2-core machine).
 ROS2_ENV = os.environ.get('DRIVE_BRIDGE_ROS2_ENV', '')
 SERVICES = {'list': (ListParameters, 'list_parameters'),
             'describe': (DescribeParameters, 'describe_parameters'),
@@ -537,8 +538,8 @@ def ros2(verb: str, *args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.skipif(not ROS2_ENV or not os.path.exists(ROS2_ENV) or not shutil.which('bash'),
-                    reason='set DRIVE_BRIDGE_ROS2_ENV to the env.sh of a ros2 CLI built by '
-                    '../shared/tools/ros2_tools.sh to run it (opt-in: slow)')
+                    reason='set DRIVE_BRIDGE_ROS2_ENV to a file that puts ros2 on the path '
+                    '(/opt/ros/jazzy/setup.bash) to run it (opt-in: slow)')
 def test_ros2_param_cli(params, sim, tmp_path):
     node = '/line/conv_parameters'
     listed = ros2('list', node)
