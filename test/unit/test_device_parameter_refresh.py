@@ -2,11 +2,17 @@
 
 from concurrent.futures import Future
 
-from drive_bridge.ros.node.device_parameters import messages
-from drive_bridge.ros.node.device_parameters.cache import ValueCache
-from drive_bridge.ros.node.device_parameters.refresher import DEFAULT_WATCH_WINDOW_S, Refresher
-from drive_bridge.ros.node.device_parameters.writer import nothing_written
-from rcl_interfaces.msg import ParameterType, ParameterValue
+import pytest
+
+# rclpy is not in the pymodbus 3.6.9 venv (transport tiers only): skipped there.
+pytest.importorskip('rcl_interfaces.msg', reason='ROS 2 (rclpy) from PyPI')
+
+from drive_bridge.ros.node.device_parameters import messages  # noqa: E402, I100
+from drive_bridge.ros.node.device_parameters.cache import ValueCache  # noqa: E402
+from drive_bridge.ros.node.device_parameters.refresher import (  # noqa: E402
+    DEFAULT_WATCH_WINDOW_S, Refresher)
+from drive_bridge.ros.node.device_parameters.writer import nothing_written  # noqa: E402
+from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
 
 
 class Parameter:
