@@ -22,11 +22,11 @@ silence, :class:`LinkDown` when the port is gone, :class:`DeviceException` for a
 another :class:`TransportError`, :class:`ProtocolError` or :class:`ModelMismatch` for a
 reply that does not fit. :func:`identify` treats silence at the first question as nobody
 at the address, lets :class:`LinkDown` through, and takes any other failure as "not this
-family". A device already polled (the node's) tells what it is without a transaction:
-:func:`profile_identity`.
+family". A device the node polls tells what it is in its readings' decoded fields (FC
+type 15-40 and software version 15-43 in ``/diagnostics``), without a transaction of its own.
 """
 
-from typing import Any, Dict, NamedTuple, Optional, Protocol, Tuple
+from typing import Any, NamedTuple, Optional, Protocol, Tuple
 
 from drive_bridge.devices.contracts import DeviceProfile, DeviceReading
 from drive_bridge.devices.fc_profile_drive import COIL_STATUS, FcProfileDrive, PROCESS_COILS
@@ -129,21 +129,6 @@ def family_answer(protocol: str, family: str, probe: Probe) -> Answer:
                               f'name it with --model), state {reading.state}')
     return Answer(family, f'{family} {model}, state {reading.state}', model,
                   software_version(probe.profile))
-
-
-def profile_identity(profile: DeviceProfile) -> Dict[str, str]:
-    """
-    Return what a polled profile knows of its device: family, model and, where read, more.
-
-    For a device the caller already polls (the node): no transaction. ``family`` and
-    ``model`` always (``auto`` until a poll tells it); an FC-series drive adds its type
-    text (``drive_type``, par. 15-40) and ``software_version`` (par. 15-43) once read.
-    """
-    identity = {'family': profile.family, 'model': profile.model}
-    if isinstance(profile, FcProfileDrive):
-        identity.update((key, value) for key, value in profile.identity.items()
-                        if value and not value.startswith(NOT_READABLE))
-    return identity
 
 
 def software_version(profile: DeviceProfile) -> str:

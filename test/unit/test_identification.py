@@ -86,18 +86,3 @@ def test_unknown_drive_type_says_when_the_type_is_not_readable():
     assert found.unknown_drive_type(profile, 'ready') == ''
     profile.identity['software_version'] = 'not readable (exception code 02)'
     assert found.software_version(profile) == ''
-
-
-def test_a_polled_profile_tells_its_identity_without_a_transaction():
-    line = SimProbeLine(sim_wire('fc51', software_version='4.12'))
-    probe = line.probe('fc')
-    assert found.profile_identity(probe.profile) == {'family': 'fc', 'model': 'auto'}
-    probe.poll()
-    sent = len(line.wire.sent)
-    assert found.profile_identity(probe.profile) == {
-        'family': 'fc', 'model': 'fc51', 'drive_type': 'FC-051PK75T4E20H3BXC',
-        'software_version': '4.12'}
-    assert len(line.wire.sent) == sent
-    mcd = SimProbeLine(sim_wire('mcd500')).probe('mcd')
-    mcd.poll()
-    assert found.profile_identity(mcd.profile) == {'family': 'mcd', 'model': 'mcd500'}
