@@ -289,7 +289,9 @@ def test_a_named_topic_without_publisher_is_recorded_after_the_wait(line, tmp_pa
     subscription = line.node.create_subscription(Float32, '/line1/only_listened', print, 10)
     try:
         path = str(tmp_path / 'unpublished')
-        returncode, stderr = run_recorder(['/line1/only_listened', '--wait', '1',
+        # The wait is spent in full (no publisher comes); it must also cover the recorder's
+        # discovery of this subscription: beside a CPU hog that took more than 1 s.
+        returncode, stderr = run_recorder(['/line1/only_listened', '--wait', '3',
                                            '--duration', '0.5', '-o', path])
     finally:
         line.node.destroy_subscription(subscription)
