@@ -47,6 +47,7 @@ SKIPPED = ('/rosout', '/parameter_events')
 RESCAN_PERIOD_S = 1.0
 REFERENCE_TOPIC = 'speed_reference'
 PARAMETER_RETRY_S = 1.0
+DISCOVERY_SETTLE_S = 0.5  # the bridge's topics unchanged this long: all found
 
 
 class BadInput(Exception):
@@ -141,10 +142,13 @@ def discover(node: Node, args: argparse.Namespace) -> Dict[str, str]:
     recorded without.
     """
     deadline = time.monotonic() + args.wait
+    settled = _Settled()
     while True:
         found = bridge_topics(node, args.namespace) if args.all else \
             published_topics(node, args.topics)
-        if (args.all and found) or (not args.all and len(found) == len(args.topics)):
+        if args.all and found and (settled.after(found) or time.monotonic() > deadline):
+            return found
+        if not args.all and len(found) == len(args.topics):
             return found
         if time.monotonic() > deadline:
             break
@@ -163,6 +167,26 @@ def discover(node: Node, args: argparse.Namespace) -> Dict[str, str]:
                   file=sys.stderr)
             found[topic] = known[topic][0]
     return found
+
+
+class _Settled:
+    """
+    Whether the bridge's topics stopped coming in: the same for ``DISCOVERY_SETTLE_S``.
+
+    DDS discovers a node's topics one by one, and those of the commands node beside it
+    (``speed_reference``) on their own: a recording begun at the first topic found missed
+    the speed reference at the start (found a second later, by the rescan).
+    """
+
+    def __init__(self):
+        self.topics: Dict[str, str] = {}
+        self.since_s = 0.0
+
+    def after(self, topics: Dict[str, str]) -> bool:
+        """Take what is found now; return True once it has not changed for the settle time."""
+        if topics != self.topics:
+            self.topics, self.since_s = dict(topics), time.monotonic()
+        return time.monotonic() - self.since_s >= DISCOVERY_SETTLE_S
 
 
 class _Stop:
