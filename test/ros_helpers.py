@@ -11,6 +11,7 @@ from typing import Dict, Iterator, List, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from drive_bridge.config.params_file import write_params_file
+from fork_server import default_signals, ForkedPopen
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 import rclpy
@@ -27,14 +28,15 @@ def write_params(path, bus: Dict, devices: Dict[str, Dict]) -> str:
     return write_params_file(str(path), bus, devices)
 
 
-def start_node(params_file: str, namespace: str = '',
-               restore_signals: bool = False, remaps: Sequence[str] = ()) -> subprocess.Popen:
+def start_node(params_file: str, namespace: str = '', restore_signals: bool = False,
+               remaps: Sequence[str] = (), fresh: bool = False) -> subprocess.Popen:
     """
     Start drive_bridge_node in a subprocess with the test environment.
 
     ``restore_signals``: SIGINT and SIGTERM at their defaults in the child (a child of a
     non-interactive shell's background job inherits SIGINT ignored). ``remaps``: more
-    ``-r FROM:=TO`` rules.
+    ``-r FROM:=TO`` rules. The node is forked from the test process's fork server
+    (:mod:`fork_server`), or exec'd as ``python -m`` where ``fresh``.
     """
     command = [sys.executable, '-m', 'drive_bridge.ros.node.entry', '--ros-args',
                '--params-file', params_file]
@@ -43,16 +45,11 @@ def start_node(params_file: str, namespace: str = '',
     for rule in remaps:
         command += ['-r', rule]
     log = tempfile.NamedTemporaryFile('w+', prefix='drive_bridge_node_', suffix='.log')
-    process = subprocess.Popen(command, env=dict(os.environ), stdout=log, stderr=log,
-                               text=True,
-                               preexec_fn=_default_signals if restore_signals else None)
+    process = ForkedPopen(command, env=dict(os.environ), stdout=log, stderr=log, text=True,
+                          preexec_fn=default_signals if restore_signals else None,
+                          fork=not fresh)
     process.log = log  # a file, not a pipe: a full pipe would block the node's logging
     return process
-
-
-def _default_signals() -> None:
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, signal.SIG_DFL)
 
 
 def node_output(process: subprocess.Popen) -> str:

@@ -352,7 +352,8 @@ def sigterm_round(params: str, rig, chance: random.Random, index: int) -> str:
     every third with a start call in flight, the others once the device is ready; then a
     random pause of up to 0.5 s.
     """
-    process = start_node(params, restore_signals=True)
+    # exec'd: a SIGTERM soon after the start lands as it does on a node a user started
+    process = start_node(params, restore_signals=True, fresh=True)
     client = RosClient(list(rig.devices), drives=list(rig.drives))
     problem = ''
     try:

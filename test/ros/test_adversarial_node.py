@@ -19,6 +19,7 @@ import sys
 from diagnostic_msgs.msg import DiagnosticStatus
 from drive_bridge.protocol.crc import append_crc
 from drive_bridge.sim.devices import make_sim_server
+import fork_server
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import (
@@ -296,8 +297,8 @@ def descriptor_type(node, name):
 
 
 def ctl(*args):
-    return subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', *args],
-                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    return fork_server.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', *args],
+                           capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
 
 
 def test_an_atomic_change_refused_for_another_parameter_leaves_the_declared_type(node, sim):

@@ -19,6 +19,7 @@ import time
 from typing import Dict, List, Tuple
 
 from drive_bridge.sim.faults import FaultPlan
+import fork_server
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import SetParameters
@@ -832,9 +833,9 @@ def trip_refused_reset_and_lifecycle(session, rig, trip_code: int) -> None:
 
 def ctl(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess:
     """Run drive_bridge_ctl to its end, as a user does, for the node /drive_bridge."""
-    return subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', *args],
-                          capture_output=True, text=True, timeout=timeout_s,
-                          stdin=subprocess.DEVNULL)
+    return fork_server.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', *args],
+                           capture_output=True, text=True, timeout=timeout_s,
+                           stdin=subprocess.DEVNULL)
 
 
 def test_monitor_only_drive_gets_nothing_from_the_cli(tmp_path):
@@ -847,10 +848,10 @@ def test_monitor_only_drive_gets_nothing_from_the_cli(tmp_path):
                     for command in ('start', 'stop', 'coast_stop', 'reset')]
         outcomes.append(ctl('reference', rig.name, '30'))
         outcomes.append(ctl('param', 'set', f'{rig.name}.speed_reference', '40'))
-        stream = subprocess.Popen(
+        stream = fork_server.ForkedPopen(
             [sys.executable, '-m', 'drive_bridge.ros.ctl.cli', 'reference', rig.name, '30',
              '--rate', '50'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+            preexec_fn=fork_server.default_signals)
         assert more_frames(rig, 20)  # the stream goes on meanwhile
         stream.send_signal(signal.SIGINT)
         stream.communicate(timeout=30)

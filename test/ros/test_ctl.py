@@ -13,6 +13,7 @@ from typing import List
 
 from drive_bridge.protocol.fc_profile_scaling import percent_to_word
 from drive_bridge.sim.devices import make_sim_server
+import fork_server
 from integration_helpers import first_line_then_reader_gone
 import pytest
 from ros_helpers import running_node, serving
@@ -35,8 +36,8 @@ PROG = 'drive_bridge_ctl: '
 
 def ctl(*args: str, where: List[str] = ('--namespace', NAMESPACE)) -> subprocess.CompletedProcess:
     """Run drive_bridge_ctl to its end, as a user does, for the node in /line1."""
-    return subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', *where, *args],
-                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    return fork_server.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', *where, *args],
+                           capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
 
 
 def assert_one_line(result: subprocess.CompletedProcess, status: int, expected: str) -> str:
@@ -138,11 +139,11 @@ def test_reference_once_reaches_the_running_drive(feeder):
 def test_a_reference_stream_until_ctrl_c_then_the_deadman_stops_the_drive(feeder):
     assert ctl('param', 'set', 'feeder.reference_timeout', '1').stdout == \
         'feeder.reference_timeout = 1.0 (double)\n'
-    stream = subprocess.Popen(
+    stream = fork_server.ForkedPopen(
         [sys.executable, '-m', 'drive_bridge.ros.ctl.cli', '--namespace', NAMESPACE, 'reference',
          'feeder', '-20', '--rate', '20'], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True, stdin=subprocess.DEVNULL,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        preexec_fn=fork_server.default_signals)
     try:
         assert stream.stdout.readline() == \
             'publishing -20 % on /line1/feeder/speed_reference at 20 Hz until Ctrl-C\n'
@@ -193,7 +194,7 @@ def test_state_and_echo(line):
 
 def test_a_reader_that_goes_away_ends_echo_quietly(line):
     """`drive_bridge_ctl echo ... | head -1`: exit 141 as SIGPIPE would, no traceback."""
-    echo = subprocess.Popen(
+    echo = fork_server.ForkedPopen(
         [sys.executable, '-m', 'drive_bridge.ros.ctl.cli', '--namespace', NAMESPACE, 'echo',
          'crusher/motor_current'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         stdin=subprocess.DEVNULL)
@@ -259,9 +260,9 @@ def test_bad_input_exits_2_with_one_line(line, args, expected):
 def timed_ctl(*args: str) -> tuple:
     """Run drive_bridge_ctl without --node or --namespace; return (result, seconds taken)."""
     started = time.monotonic()
-    result = subprocess.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', '--timeout',
-                             str(SLOW_TIMEOUT_S), *args], capture_output=True, text=True,
-                            timeout=3 * SLOW_TIMEOUT_S, stdin=subprocess.DEVNULL)
+    result = fork_server.run([sys.executable, '-m', 'drive_bridge.ros.ctl.cli', '--timeout',
+                              str(SLOW_TIMEOUT_S), *args], capture_output=True, text=True,
+                             timeout=3 * SLOW_TIMEOUT_S, stdin=subprocess.DEVNULL)
     return result, time.monotonic() - started
 
 

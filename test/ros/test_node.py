@@ -228,7 +228,8 @@ def test_sigterm_stops_the_motor_this_node_started(tmp_path):
     try:
         params = write_params(tmp_path / 'one.yaml', {'port': server.pty_path, 'parity': 'N'},
                               {'solo': {'family': 'mcd', 'address': 20, 'poll_rate': 10.0}})
-        process = start_node(params, namespace='/line2')
+        # exec'd, as a user starts it (the other tests fork it: test/fork_server.py)
+        process = start_node(params, namespace='/line2', fresh=True)
         client = RosClient(['solo'], namespace='/line2')
         try:
             assert client.wait_state('solo', 'ready', 15.0)

@@ -24,6 +24,7 @@ from drive_bridge.bag_metadata import REFERENCE_AT_START
 from drive_bridge.ros.record.recorder import BagRecorder
 from drive_bridge.sim.devices import make_sim_server
 from drive_bridge.tools.plot_recording import main as plot_main, panels_of, read_recording
+import fork_server
 from missing_module import run_without
 import pytest
 from ros_helpers import running_node, serving
@@ -66,10 +67,10 @@ class Recording:
 
 def start_recorder(args: List[str]) -> subprocess.Popen:
     """Start drive_bridge_record with Ctrl-C restored (a background test has SIGINT ignored)."""
-    return subprocess.Popen(
+    return fork_server.ForkedPopen(
         [sys.executable, '-m', 'drive_bridge.ros.record.cli'] + args, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        preexec_fn=fork_server.default_signals)
 
 
 def wait_for_output(process: subprocess.Popen, prefix: str, timeout_s: float = 20.0) -> str:
@@ -87,9 +88,9 @@ def wait_for_output(process: subprocess.Popen, prefix: str, timeout_s: float = 2
 
 def run_recorder(args: List[str], timeout_s: float = 30.0) -> Tuple[int, str]:
     """Run drive_bridge_record to its end; return (exit status, stderr)."""
-    result = subprocess.run([sys.executable, '-m', 'drive_bridge.ros.record.cli'] + args,
-                            capture_output=True, text=True, timeout=timeout_s,
-                            stdin=subprocess.DEVNULL)
+    result = fork_server.run([sys.executable, '-m', 'drive_bridge.ros.record.cli'] + args,
+                             capture_output=True, text=True, timeout=timeout_s,
+                             stdin=subprocess.DEVNULL)
     return result.returncode, result.stderr
 
 
