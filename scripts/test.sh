@@ -12,6 +12,8 @@
 #                                 (those marked pymodbus also in .venv-pymodbus369)
 #     pymodbus 3.6.9              the other tests marked pymodbus, in .venv-pymodbus369
 #     ROS tier                    pytest in .venv, pytest-xdist workers
+# except on a free machine, where two pairs go side by side: the pymodbus 3.6.9 run beside
+# the integration tier, the docs and the installed commands beside the realtime tests.
 # A failing step does not stop the run: the other steps run, the table marks it FAILED and
 # the script exits 1. Arguments go to the pytest runs of the checkout (scripts/test.sh -x).
 # Workers per tier: UNIT_WORKERS, INTEGRATION_WORKERS, REALTIME_WORKERS, ROS_WORKERS; by
@@ -32,21 +34,24 @@ busy_cores() {
     idle = (a[5] - b[5]) + (a[6] - b[6])
     printf "%.2f", (total > 0 ? (total - idle) / total * cores : 0) }'
 }
-# Workers per tier (docs/contributing.md says why). Where the machine is free, the wire-bound
-# tiers take three workers and the ROS tier four; where other work keeps half a core or more
-# busy when the run starts (a CI machine shared with other jobs), two and three: beside a CPU
-# hog, four ROS workers starved a test's simulator past its 1 s reply timeout; the wire-bound
-# tiers were tried with more than two only on a free machine. The load is sampled once, at
-# the start.
+# Workers per tier (docs/contributing.md says why). Where the machine is free, the integration
+# tier takes seven workers and the ROS tier eight (their tests mostly wait: on a free machine
+# they use 1.2 and 1.8 of its 2 cores); where other work keeps half a core or more busy when
+# the run starts (a CI machine shared with other jobs), two and three: beside a CPU hog, four
+# ROS workers starved a test's simulator past its 1 s reply timeout; the wire-bound tiers
+# were tried with more than two only on a free machine. The load is sampled once, at the
+# start.
 busy=$(busy_cores)
 if awk -v busy="$busy" 'BEGIN { exit !(busy >= 0.5) }'; then
-  load_note="other work keeps $busy cores busy: fewer workers"
+  load_note="other work keeps $busy cores busy: fewer workers, one step at a time"
+  machine_free=0
   default_wire_workers=2
   default_ros_workers=3
 else
   load_note="the machine is free ($busy cores busy)"
-  default_wire_workers=3
-  default_ros_workers=4
+  machine_free=1
+  default_wire_workers=7
+  default_ros_workers=8
 fi
 unit_workers=${UNIT_WORKERS:-2}
 integration_workers=${INTEGRATION_WORKERS:-$default_wire_workers}
@@ -170,13 +175,42 @@ echo "pymodbus $("$VENV/bin/python" -c 'import pymodbus; print(pymodbus.__versio
   "$("$VENV369/bin/python" -c 'import pymodbus; print(pymodbus.__version__)')" \
   'in .venv-pymodbus369'
 
-# The integration tier, its realtime tests, the pymodbus 3.6.9 run.
+# The integration tier, its realtime tests, the pymodbus 3.6.9 run. On a free machine the
+# pymodbus 3.6.9 run goes beside the integration tier (both wait on the wire: 1.2 cores
+# together), and the docs and the installed commands (one core, about 10 s) beside the
+# realtime tests, which pass beside a CPU hog as well; on a busy machine one after another.
 wire_steps() {
+  if [ "$machine_free" = 1 ]; then
+    step 'integration, pymodbus 3.6.9 beside' integration_tests "$@"
+    local beside_log="$workspace/beside.log" beside_pid status
+    compute_beside_realtime > "$beside_log" 2>&1 &
+    beside_pid=$!
+    step 'integration tier: realtime tests' realtime_tests "$@"
+    wait "$beside_pid"
+    echo '-- beside the realtime tests:'
+    cat "$beside_log"
+    return
+  fi
   step 'integration tier' pytest_in "$VENV" -n "$integration_workers" --dist loadgroup \
     -m 'not realtime' test/integration "$@"
   step 'integration tier: realtime tests' realtime_tests "$@"
   step 'pymodbus 3.6.9: marked tests' pytest_in "$VENV369" -n "$integration_workers" \
     --dist loadgroup -m 'pymodbus and not realtime' test/unit test/integration "$@"
+}
+# The integration tier and, beside it, the other tests marked pymodbus with pymodbus 3.6.9
+# in two workers (its output after the tier's).
+integration_tests() {
+  local log369="$workspace/integration369.log" pid369 status
+  pytest_in "$VENV369" -n 2 --dist loadgroup -m 'pymodbus and not realtime' test/unit \
+    test/integration "$@" > "$log369" 2>&1 &
+  pid369=$!
+  pytest_in "$VENV" -n "$integration_workers" --dist loadgroup -m 'not realtime' \
+    test/integration "$@"
+  status=$?
+  wait "$pid369" || status=1
+  echo '-- beside it, the tests marked pymodbus (not realtime) with pymodbus 3.6.9:'
+  cat "$log369"
+  return $status
 }
 # Tests whose threads must run within milliseconds: no CPU-bound workers beside them. They
 # wait on the clock, so a few of them share the machine: the
@@ -208,14 +242,23 @@ compute_steps() {
   # Alone, before the tests with deadlines: beside them in the idle scheduling class (or at
   # nice 19) the babbling-line tests held every pty on the machine for 6-38 s, and at the
   # normal priority the babbler missed its pace (docs/contributing.md).
-  step 'docs' scripts/docs.sh "$workspace/docs"
+  [ "$machine_free" = 1 ] || step 'docs' scripts/docs.sh "$workspace/docs"
   if step 'colcon build' workspace_colcon build --event-handlers console_direct-; then
-    step 'installed commands' scripts/check_install.sh "$workspace/install"
+    built=1
+    [ "$machine_free" = 1 ] || step 'installed commands' scripts/check_install.sh \
+      "$workspace/install"
     # The unit tier and the linters run here only, against the install space; the
     # integration and ROS tiers run from the checkout only (docs/contributing.md).
     step 'colcon test: unit tier, linters' colcon_test
   fi
 }
+# On a free machine, beside the realtime tests: one process at a time, one core.
+compute_beside_realtime() {
+  step 'docs, beside the realtime tests' scripts/docs.sh "$workspace/docs"
+  [ "$built" = 1 ] && step 'installed commands, beside them' \
+    scripts/check_install.sh "$workspace/install"
+}
+built=0
 compute_steps
 wire_steps "$@"
 # The ROS tier computes more than it waits (a node's start costs about 1 s of CPU), so it runs

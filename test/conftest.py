@@ -31,15 +31,16 @@ LONGEST_FIRST = (
     'test/ros/test_joints_node.py',  # 51 s in 12 tests, module node
     'test/ros/test_safety_cases.py',  # 110 s in 16 tests
     'test/ros/test_adversarial_safety.py',  # 210 s in 65 tests, 30 of them on shared nodes
-    'test/integration/test_reconnect.py',  # realtime: 16, 11, 11 s
+    'test/integration/test_fault_injection.py::test_ap_ascii_faults',  # 52 s
+    'test/integration/test_soak.py',  # 70 s in 9 tests: 32 s, 21 s, ...
+    'test/integration/test_fc_protocol_sim.py::test_random_faults',  # 22 s
+    'test/integration/test_reconnect.py',  # realtime: 22, 11, 11 s
+    'test/integration/test_cli.py::test_scan_finds_each_device',  # 19 s
+    'test/integration/test_fc_protocol_transport.py::test_random_wire_bytes',  # 17 s
     'test/integration/test_safety_bus.py',  # the babbling lines, one xdist group: 45 s
-    'test/integration/test_fc_protocol_sim.py::test_random_faults',  # 19 s
-    'test/integration/test_fc_protocol_transport.py::test_random_wire_bytes',  # 14 s
-    'test/integration/test_soak.py',  # 50 s in 9 tests
-    'test/integration/test_fault_injection.py::test_ap_ascii_faults',  # 16 s
-    'test/integration/test_bus.py::test_start_stop',  # 8 s
-    'test/integration/test_cli.py',  # 60 s in 30 tests
     'test/integration/test_docs_examples.py',  # 20 s
+    'test/integration/test_bus.py::test_start_stop',  # 9 s
+    'test/integration/test_cli.py',  # 60 s in 30 tests
 )
 
 
