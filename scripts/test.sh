@@ -182,11 +182,13 @@ echo "pymodbus $("$VENV/bin/python" -c 'import pymodbus; print(pymodbus.__versio
 wire_steps() {
   if [ "$machine_free" = 1 ]; then
     step 'integration, pymodbus 3.6.9 beside' integration_tests "$@"
-    local beside_log="$workspace/beside.log" beside_pid status
+    local beside_log="$workspace/beside.log" beside_pid
     compute_beside_realtime > "$beside_log" 2>&1 &
     beside_pid=$!
     step 'integration tier: realtime tests' realtime_tests "$@"
-    wait "$beside_pid"
+    # each step beside marks its own line FAILED; a lane that died before it could, here
+    wait "$beside_pid" || printf '%-34s %7s %7s  %s\n' 'docs, installed commands' '?' '?' \
+      FAILED >> "$steps"
     echo '-- beside the realtime tests:'
     cat "$beside_log"
     return
@@ -212,10 +214,12 @@ integration_tests() {
   cat "$log369"
   return $status
 }
-# Tests whose threads must run within milliseconds: no CPU-bound workers beside them. They
-# wait on the clock, so a few of them share the machine: the
-# realtime workers, and beside them one process that runs the ones marked pymodbus again with
-# pymodbus 3.6.9 (three tests, about 15 s), one after another.
+# Tests whose threads must run within milliseconds: no CPU-bound workers beside them, at most
+# one process that keeps one core busy (they pass beside a CPU hog): on a free machine the
+# docs build and the installed commands, one after another. They wait on the clock, so a few
+# of them share the machine: the realtime workers, and beside them one process that runs the
+# ones marked pymodbus again with pymodbus 3.6.9 (three tests, about 15 s), one after
+# another.
 realtime_tests() {
   local log369="$workspace/realtime369.log" pid369 status
   pytest_in "$VENV369" -m 'pymodbus and realtime' test/integration "$@" > "$log369" 2>&1 &
@@ -241,7 +245,8 @@ colcon_test() {
 compute_steps() {
   # Alone, before the tests with deadlines: beside them in the idle scheduling class (or at
   # nice 19) the babbling-line tests held every pty on the machine for 6-38 s, and at the
-  # normal priority the babbler missed its pace (docs/contributing.md).
+  # normal priority the babbler missed its pace (docs/contributing.md). On a free machine
+  # the docs and the installed commands go beside the realtime tests instead (one core).
   [ "$machine_free" = 1 ] || step 'docs' scripts/docs.sh "$workspace/docs"
   if step 'colcon build' workspace_colcon build --event-handlers console_direct-; then
     built=1
@@ -254,9 +259,13 @@ compute_steps() {
 }
 # On a free machine, beside the realtime tests: one process at a time, one core.
 compute_beside_realtime() {
-  step 'docs, beside the realtime tests' scripts/docs.sh "$workspace/docs"
-  [ "$built" = 1 ] && step 'installed commands, beside them' \
-    scripts/check_install.sh "$workspace/install"
+  local status=0
+  step 'docs, beside the realtime tests' scripts/docs.sh "$workspace/docs" || status=1
+  if [ "$built" = 1 ]; then
+    step 'installed commands, beside them' scripts/check_install.sh "$workspace/install" \
+      || status=1
+  fi
+  return $status
 }
 built=0
 compute_steps

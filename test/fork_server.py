@@ -50,11 +50,16 @@ PRELOAD = (
     'drive_bridge.ros.record.recorder',
     'rosbag2_py',
 )
-# Read by the interpreter at its start: a command asking for other values is exec'd.
+# Read at a process's start or its imports (the interpreter, the C libraries, the generated
+# message modules): a command whose environment has other values than the server had when it
+# started is exec'd.
 STARTUP_VARIABLES = ('PYTHONUNBUFFERED', 'PYTHONPYCACHEPREFIX', 'PYTHONDONTWRITEBYTECODE',
-                     'PYTHONPATH', 'PYTHONHASHSEED', 'PYTHONWARNINGS', 'PYTHONDEVMODE',
-                     'PYTHONFAULTHANDLER', 'PYTHONTRACEMALLOC', 'PYTHONIOENCODING',
-                     'PYTHONUTF8', 'PYTHONOPTIMIZE', 'PYTHONSAFEPATH', 'OPENBLAS_NUM_THREADS')
+                     'PYTHONPATH', 'PYTHONHOME', 'PYTHONNOUSERSITE', 'PYTHONHASHSEED',
+                     'PYTHONWARNINGS', 'PYTHONDEVMODE', 'PYTHONFAULTHANDLER',
+                     'PYTHONTRACEMALLOC', 'PYTHONIOENCODING', 'PYTHONUTF8', 'PYTHONOPTIMIZE',
+                     'PYTHONSAFEPATH', 'OPENBLAS_NUM_THREADS', 'LANG', 'LC_ALL', 'LC_CTYPE',
+                     'LD_LIBRARY_PATH', 'LD_PRELOAD', 'AMENT_PREFIX_PATH',
+                     'ROS_PYTHON_CHECK_FIELDS')
 # Popen._execute_child's arguments after restore_signals when none is given: gid, gids, uid,
 # umask, start_new_session, process_group (Python 3.11 to 3.13).
 _NO_CREDENTIALS = (None, None, None, -1, False, -1)
@@ -79,14 +84,17 @@ class ForkedPopen(subprocess.Popen):
     def _execute_child(self, args, executable, preexec_fn, close_fds, pass_fds, cwd, env,
                        startupinfo, creationflags, shell, p2cread, p2cwrite, c2pread, c2pwrite,
                        errread, errwrite, restore_signals, *more):
-        module = self._forkable(args, executable, preexec_fn, pass_fds, shell, env, more)
+        module = self._forkable(args, executable, preexec_fn, pass_fds, shell, env, cwd, more)
         server = the_server() if module else None
+        if server is not None and not server.takes(os.environ if env is None else env):
+            server = None
         pid = None
         if server is not None:
             # -1: the test process's own, as it is now (pytest's capture of this test)
             stdio = [given if given != -1 else own
                      for given, own in zip((p2cread, c2pwrite, errwrite), (0, 1, 2))]
-            pid = server.spawn(module, list(args[3:]), dict(os.environ if env is None else env),
+            pid = server.spawn(module, [os.fspath(arg) for arg in args[3:]],
+                               dict(os.environ if env is None else env),
                                os.fspath(cwd or os.getcwd()), stdio,
                                preexec_fn is default_signals)
         if pid is None:
@@ -100,7 +108,7 @@ class ForkedPopen(subprocess.Popen):
         self._child_created = True
         self._close_pipe_fds(p2cread, p2cwrite, c2pread, c2pwrite, errread, errwrite)
 
-    def _forkable(self, args, executable, preexec_fn, pass_fds, shell, env,
+    def _forkable(self, args, executable, preexec_fn, pass_fds, shell, env, cwd,
                   more) -> Optional[str]:
         """Return the module to fork, or None where the command must be exec'd."""
         if not self._fork or os.environ.get('DRIVE_BRIDGE_TEST_FORK', '1') == '0':
@@ -113,8 +121,10 @@ class ForkedPopen(subprocess.Popen):
             return None
         if args[2] not in FORKED_MODULES:
             return None
-        wanted = os.environ if env is None else env
-        if any(wanted.get(name) != os.environ.get(name) for name in STARTUP_VARIABLES):
+        if cwd is not None and not os.path.isdir(cwd):
+            return None  # Popen raises, as for any command
+        if env is not None and not all(isinstance(key, str) and isinstance(value, str)
+                                       for key, value in env.items()):
             return None
         return args[2]
 
@@ -147,26 +157,55 @@ def run(args: Sequence[str], *, input=None, capture_output: bool = False,  # noq
 class ServerClient:
     """This test process's end of the server: one request at a time."""
 
-    def __init__(self, process: subprocess.Popen, connection: socket.socket):
+    def __init__(self, process: subprocess.Popen, connection: socket.socket,
+                 environment: Dict[str, str]):
         self.process = process
         self.connection = connection
+        self.environment = environment  # the server's, from its start
         self.lock = threading.Lock()
+        self.broken = False
+
+    def takes(self, env) -> bool:
+        """Whether a command with environment ``env`` starts as it would from the server."""
+        return not self.broken and all(env.get(name) == self.environment.get(name)
+                                       for name in STARTUP_VARIABLES)
 
     def spawn(self, module: str, arguments: List[str], env: Dict[str, str], cwd: str,
               stdio: Sequence[int], default_signals: bool) -> Optional[int]:
-        """Fork ``module`` with ``arguments``; return its pid, or None (then exec it)."""
+        """
+        Fork ``module`` with ``arguments``; return its pid, or None where nothing was sent.
+
+        Once the request is sent, the command may run: anything that goes wrong then (an
+        interrupt, a pytest-timeout, the server gone) breaks the server for good and raises,
+        so that a command is never started twice and no reply is read for another request.
+        """
         request = json.dumps({'module': module, 'arguments': arguments, 'env': env,
                               'cwd': cwd, 'default_signals': default_signals}).encode()
-        fds = list(stdio)
         with self.lock:
-            try:
-                socket.send_fds(self.connection, [request], fds)
-                reply = self.connection.recv(MAX_MESSAGE_BYTES)
-            except OSError:
+            if self.broken:
                 return None
-        if not reply:
-            return None
-        return json.loads(reply).get('pid')
+            try:
+                socket.send_fds(self.connection, [request], list(stdio))
+            except OSError:
+                self._break()
+                return None
+            try:
+                reply = self.connection.recv(MAX_MESSAGE_BYTES)
+                pid = json.loads(reply).get('pid') if reply else None
+            except BaseException:
+                self._break()
+                raise
+            if pid is None:
+                self._break()
+                raise RuntimeError(f'fork server: no pid for {module} (reply {reply!r}): '
+                                   'it may have started; see test/fork_server.py')
+            return pid
+
+    def _break(self) -> None:
+        self.broken = True
+        print('fork server: broken, commands of this test process are exec-ed from now on',
+              file=sys.stderr, flush=True)
+        self.connection.close()
 
     def close(self) -> None:
         """End the server (it ends by itself when this process ends)."""
@@ -194,7 +233,10 @@ def the_server() -> Optional[ServerClient]:
 def _start_server() -> Optional[ServerClient]:
     libc = ctypes.CDLL(None, use_errno=True)
     if libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) != 0:
+        print('fork server: prctl(PR_SET_CHILD_SUBREAPER) refused: commands are exec-ed',
+              file=sys.stderr, flush=True)
         return None
+    environment = dict(os.environ)
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     here = os.path.dirname(os.path.abspath(__file__))
     code = (f'import sys; sys.path.insert(0, {here!r}); import fork_server; '
@@ -202,12 +244,19 @@ def _start_server() -> Optional[ServerClient]:
     process = subprocess.Popen([sys.executable, '-c', code], pass_fds=[theirs.fileno()],
                                stdin=subprocess.DEVNULL)
     theirs.close()
-    ready = ours.recv(MAX_MESSAGE_BYTES)
+    ours.settimeout(60.0)
+    try:
+        ready = ours.recv(MAX_MESSAGE_BYTES)
+    except OSError:
+        ready = b''
+    ours.settimeout(None)
     if ready != b'ready':
+        print('fork server: did not start: commands are exec-ed', file=sys.stderr, flush=True)
         ours.close()
+        process.kill()
         process.wait()
         return None
-    client = ServerClient(process, ours)
+    client = ServerClient(process, ours, environment)
     atexit.register(client.close)
     return client
 
@@ -238,6 +287,11 @@ def serve(fd: int):
         if not message:
             return 0
         request = json.loads(message)
+        if len(fds) != 3:
+            for received in fds:
+                os.close(received)
+            connection.send(json.dumps({'pid': None}).encode())
+            continue
         pid = _fork_command(connection, request, fds)
         if pid == 0:
             return _run_command(connection, request, fds)

@@ -274,10 +274,11 @@ def level_is(level) -> Any:
 class Session:
     """The node on a rig and a client; on exit the client closes and the node gets SIGTERM."""
 
-    def __init__(self, rig, path, restore_signals: bool = True, **bus: Any):
+    def __init__(self, rig, path, restore_signals: bool = True, fresh: bool = False,
+                 **bus: Any):
         self.rig = rig
         self.process = start_node(write_params(path, rig.bus_settings(**bus), rig.devices),
-                                  restore_signals=restore_signals)
+                                  restore_signals=restore_signals, fresh=fresh)
         self.client = RosClient(list(rig.devices), drives=list(rig.drives))
         self.closed = False
         self.code: Optional[int] = None

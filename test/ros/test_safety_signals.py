@@ -148,7 +148,8 @@ def test_inactive_node_still_stops_a_starter_that_may_run(tmp_path):
 def test_repeated_exit_signals_still_stop_every_motor(sequence, tmp_path):
     """Case 4: signals 100 ms apart during shutdown: no traceback, exit 0, all stopped."""
     rig = make_mixed_rig()
-    with Session(rig, tmp_path / 'mixed.yaml') as session:
+    # exec'd, as a user starts it: its import threads exist (test/fork_server.py)
+    with Session(rig, tmp_path / 'mixed.yaml', fresh=True) as session:
         client = session.client
         for name in rig.devices:
             assert client.wait_state(name, 'ready', READY_S), name

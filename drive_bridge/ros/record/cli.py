@@ -48,6 +48,7 @@ RESCAN_PERIOD_S = 1.0
 REFERENCE_TOPIC = 'speed_reference'
 PARAMETER_RETRY_S = 1.0
 DISCOVERY_SETTLE_S = 0.5  # the bridge's topics unchanged this long: all found
+DISCOVERY_SETTLE_ALONE_S = 2.0  # the same without its commands node
 
 
 class BadInput(Exception):
@@ -146,11 +147,14 @@ def discover(node: Node, args: argparse.Namespace) -> Dict[str, str]:
     while True:
         found = bridge_topics(node, args.namespace) if args.all else \
             published_topics(node, args.topics)
-        if args.all and found and (settled.after(found) or time.monotonic() > deadline):
+        now = time.monotonic()
+        if args.all:
+            quiet = settled.after(found, _has_commands_node(node, args.namespace), now)
+            if found and (quiet or now > deadline):
+                return found
+        elif len(found) == len(args.topics):
             return found
-        if not args.all and len(found) == len(args.topics):
-            return found
-        if time.monotonic() > deadline:
+        if now > deadline:
             break
         rclpy.spin_once(node, timeout_sec=0.1)
     hint = '(is the bridge running, in this ROS_DOMAIN_ID and namespace?)'
@@ -169,24 +173,34 @@ def discover(node: Node, args: argparse.Namespace) -> Dict[str, str]:
     return found
 
 
+def _has_commands_node(node: Node, namespace: str) -> bool:
+    """Whether the bridge's commands node (its command subscriptions) is discovered."""
+    wanted = BRIDGE_NODE + COMMANDS_NODE_SUFFIX
+    where = '/' + namespace.strip('/') if namespace.strip('/') else '/'
+    return (wanted, where) in node.get_node_names_and_namespaces()
+
+
 class _Settled:
     """
-    Whether the bridge's topics stopped coming in: the same for ``DISCOVERY_SETTLE_S``.
+    Whether the bridge's topics stopped coming in.
 
     DDS discovers a node's topics one by one, and those of the commands node beside it
     (``speed_reference``) on their own: a recording begun at the first topic found missed
-    the speed reference at the start (found a second later, by the rescan).
+    the speed reference at the start (found a second later, by the rescan). Settled: the
+    topics unchanged for ``DISCOVERY_SETTLE_S`` with the commands node discovered, or for
+    ``DISCOVERY_SETTLE_ALONE_S`` without it (a bridge not configured has none).
     """
 
     def __init__(self):
         self.topics: Dict[str, str] = {}
         self.since_s = 0.0
 
-    def after(self, topics: Dict[str, str]) -> bool:
-        """Take what is found now; return True once it has not changed for the settle time."""
+    def after(self, topics: Dict[str, str], with_commands_node: bool, now_s: float) -> bool:
+        """Take what is found at ``now_s`` (monotonic); return whether it has settled."""
         if topics != self.topics:
-            self.topics, self.since_s = dict(topics), time.monotonic()
-        return time.monotonic() - self.since_s >= DISCOVERY_SETTLE_S
+            self.topics, self.since_s = dict(topics), now_s
+        quiet_s = DISCOVERY_SETTLE_S if with_commands_node else DISCOVERY_SETTLE_ALONE_S
+        return now_s - self.since_s >= quiet_s
 
 
 class _Stop:
