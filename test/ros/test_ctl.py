@@ -312,8 +312,10 @@ def test_a_service_under_the_node_name_is_answered_with_the_name_meant(line):
 
 
 def test_no_node_is_one_line_that_names_what_is_there(line):
-    result = ctl('--timeout', '1', 'state', 'feeder', where=[])  # default: /drive_bridge
-    assert_one_line(result, 2, 'no node /drive_bridge within 1 s (ROS_DOMAIN_ID ')
+    # default: /drive_bridge. 3 s: the command discovers /line1/drive_bridge within them
+    # (with eight test workers on two cores, 1 s was once too short for its discovery)
+    result = ctl('--timeout', '3', 'state', 'feeder', where=[])
+    assert_one_line(result, 2, 'no node /drive_bridge within 3 s (ROS_DOMAIN_ID ')
     assert 'has /line1/drive_bridge: choose with --node' in result.stderr
 
 
