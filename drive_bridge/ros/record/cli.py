@@ -101,15 +101,21 @@ def full_topic_name(topic: str, namespace: str) -> str:
 
 
 def bridge_topics(node: Node, namespace: str) -> Dict[str, str]:
+    """Return topic -> type of the drive_bridge node in ``namespace`` ({} if not found)."""
+    return bridge_graph(node, namespace)[0]
+
+
+def bridge_graph(node: Node, namespace: str) -> Tuple[Dict[str, str], bool]:
     """
-    Return topic -> type of the drive_bridge node in ``namespace`` ({} if not found).
+    Return the drive_bridge node's topics in ``namespace`` and whether its commands node is.
 
     Its command subscriptions (``speed_reference``, ``~/joint_commands``) are those of its
     commands node, ``drive_bridge_commands`` beside it
-    (:mod:`drive_bridge.ros.node.command_inputs`).
+    (:mod:`drive_bridge.ros.node.command_inputs`), made when the bridge is configured.
     """
     topics: Dict[str, str] = {}
     commands_node = BRIDGE_NODE + COMMANDS_NODE_SUFFIX
+    with_commands_node = True
     for query, name in ((node.get_publisher_names_and_types_by_node, BRIDGE_NODE),
                         (node.get_subscriber_names_and_types_by_node, BRIDGE_NODE),
                         (node.get_subscriber_names_and_types_by_node, commands_node)):
@@ -117,11 +123,12 @@ def bridge_topics(node: Node, namespace: str) -> Dict[str, str]:
             found = query(name, namespace)
         except NodeNameNonExistentError:
             if name == commands_node:
-                continue  # not made yet (the node not configured)
-            return {}
+                with_commands_node = False  # not made yet (the node not configured)
+                continue
+            return {}, False
         topics.update((topic, types[0]) for topic, types in found
                       if topic not in SKIPPED and types)
-    return topics
+    return topics, with_commands_node
 
 
 def published_topics(node: Node, wanted: List[str]) -> Dict[str, str]:
@@ -145,15 +152,16 @@ def discover(node: Node, args: argparse.Namespace) -> Dict[str, str]:
     deadline = time.monotonic() + args.wait
     settled = _Settled()
     while True:
-        found = bridge_topics(node, args.namespace) if args.all else \
-            published_topics(node, args.topics)
         now = time.monotonic()
         if args.all:
-            quiet = settled.after(found, _has_commands_node(node, args.namespace), now)
+            found, with_commands_node = bridge_graph(node, args.namespace)
+            quiet = settled.after(found, with_commands_node, now)
             if found and (quiet or now > deadline):
                 return found
-        elif len(found) == len(args.topics):
-            return found
+        else:
+            found = published_topics(node, args.topics)
+            if len(found) == len(args.topics):
+                return found
         if now > deadline:
             break
         rclpy.spin_once(node, timeout_sec=0.1)
@@ -171,13 +179,6 @@ def discover(node: Node, args: argparse.Namespace) -> Dict[str, str]:
                   file=sys.stderr)
             found[topic] = known[topic][0]
     return found
-
-
-def _has_commands_node(node: Node, namespace: str) -> bool:
-    """Whether the bridge's commands node (its command subscriptions) is discovered."""
-    wanted = BRIDGE_NODE + COMMANDS_NODE_SUFFIX
-    where = '/' + namespace.strip('/') if namespace.strip('/') else '/'
-    return (wanted, where) in node.get_node_names_and_namespaces()
 
 
 class _Settled:
