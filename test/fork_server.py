@@ -85,16 +85,16 @@ class ForkedPopen(subprocess.Popen):
                        startupinfo, creationflags, shell, p2cread, p2cwrite, c2pread, c2pwrite,
                        errread, errwrite, restore_signals, *more):
         module = self._forkable(args, executable, preexec_fn, pass_fds, shell, env, cwd, more)
+        environment = dict(os.environ if env is None else env)
         server = the_server() if module else None
-        if server is not None and not server.takes(os.environ if env is None else env):
+        if server is not None and not server.takes(environment):
             server = None
         pid = None
         if server is not None:
             # -1: the test process's own, as it is now (pytest's capture of this test)
             stdio = [given if given != -1 else own
                      for given, own in zip((p2cread, c2pwrite, errwrite), (0, 1, 2))]
-            pid = server.spawn(module, [os.fspath(arg) for arg in args[3:]],
-                               dict(os.environ if env is None else env),
+            pid = server.spawn(module, [os.fspath(arg) for arg in args[3:]], environment,
                                os.fspath(cwd or os.getcwd()), stdio,
                                preexec_fn is default_signals)
         if pid is None:
@@ -292,7 +292,7 @@ def serve(fd: int):
                 os.close(received)
             connection.send(json.dumps({'pid': None}).encode())
             continue
-        pid = _fork_command(connection, request, fds)
+        pid = _fork_command()
         if pid == 0:
             return _run_command(connection, request, fds)
         for received in fds:
@@ -319,7 +319,7 @@ def _load_type_supports() -> None:
                     pass
 
 
-def _fork_command(connection: socket.socket, request: Dict, fds: List[int]) -> Optional[int]:
+def _fork_command() -> Optional[int]:
     """Fork twice; return 0 in the command, its pid (or None) in the server."""
     read_end, write_end = os.pipe()
     middle = os.fork()
