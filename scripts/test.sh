@@ -199,20 +199,29 @@ wire_steps() {
   step 'pymodbus 3.6.9: marked tests' pytest_in "$VENV369" -n "$integration_workers" \
     --dist loadgroup -m 'pymodbus and not realtime' test/unit test/integration "$@"
 }
-# The integration tier and, beside it, the other tests marked pymodbus with pymodbus 3.6.9
-# in two workers (its output after the tier's).
-integration_tests() {
-  local log369="$workspace/integration369.log" pid369 status
-  pytest_in "$VENV369" -n 2 --dist loadgroup -m 'pymodbus and not realtime' test/unit \
-    test/integration "$@" > "$log369" 2>&1 &
+# pytest_beside_369 NAME ARGS369 ARGS...: pytest in .venv with ARGS and, beside it, in
+# .venv-pymodbus369 with the arguments in the array named ARGS369; the second's output after
+# the first's, under NAME; fails if either does.
+pytest_beside_369() {
+  local name=$1 log369="$workspace/$2.log" pid369 status
+  local -n pytest369_args=$2
+  shift 2
+  pytest_in "$VENV369" "${pytest369_args[@]}" > "$log369" 2>&1 &
   pid369=$!
-  pytest_in "$VENV" -n "$integration_workers" --dist loadgroup -m 'not realtime' \
-    test/integration "$@"
+  pytest_in "$VENV" "$@"
   status=$?
   wait "$pid369" || status=1
-  echo '-- beside it, the tests marked pymodbus (not realtime) with pymodbus 3.6.9:'
+  echo "-- $name, with pymodbus 3.6.9:"
   cat "$log369"
   return $status
+}
+# The integration tier and, beside it, the other tests marked pymodbus with pymodbus 3.6.9
+# in two workers.
+integration_tests() {
+  local integration369=(-n 2 --dist loadgroup -m 'pymodbus and not realtime' test/unit
+    test/integration "$@")
+  pytest_beside_369 'beside it, the tests marked pymodbus (not realtime)' integration369 \
+    -n "$integration_workers" --dist loadgroup -m 'not realtime' test/integration "$@"
 }
 # Tests whose threads must run within milliseconds: no CPU-bound workers beside them, at most
 # one process that keeps one core busy (they pass beside a CPU hog): on a free machine the
@@ -221,15 +230,9 @@ integration_tests() {
 # ones marked pymodbus again with pymodbus 3.6.9 (three tests, about 15 s), one after
 # another.
 realtime_tests() {
-  local log369="$workspace/realtime369.log" pid369 status
-  pytest_in "$VENV369" -m 'pymodbus and realtime' test/integration "$@" > "$log369" 2>&1 &
-  pid369=$!
-  pytest_in "$VENV" -n "$realtime_workers" --dist loadgroup -m realtime test/integration "$@"
-  status=$?
-  wait "$pid369" || status=1
-  echo '-- the same marked pymodbus, with pymodbus 3.6.9:'
-  cat "$log369"
-  return $status
+  local realtime369=(-m 'pymodbus and realtime' test/integration "$@")
+  pytest_beside_369 'the same marked pymodbus' realtime369 \
+    -n "$realtime_workers" --dist loadgroup -m realtime test/integration "$@"
 }
 
 # The docs and the colcon workspace (build, installed commands, unit tier, linters).
