@@ -145,8 +145,11 @@ def encode_value(spec: ParameterSpec, value: Value, factors: Dict[int, float]) -
         reason = text_refusal(value)
         if reason:
             raise CommandRefused(f'{spec.name}: {reason}')
-        try:  # as many registers as the text needs, an odd length filled with a space
-            return text_to_registers(value, len(value) + len(value) % 2)
+        # As many registers as the text needs, an odd length filled with a space; an empty
+        # text as one register of spaces (a write carries 1 to 10 registers, manual 003
+        # "Text Blocks": a write of none is refused with exception 66).
+        try:
+            return text_to_registers(value, max(2, len(value) + len(value) % 2))
         except (ValueError, UnicodeEncodeError) as error:
             raise CommandRefused(f'{spec.name}: {error}') from None
     raw = raw_number(spec, value, factors)

@@ -240,6 +240,14 @@ def test_manual_003_example_6_writes_display_text_to_par_533_at_14d1():
         0x3132, 0x3334, 0x3536, 0x3738, 0x3930]
 
 
+def test_an_empty_text_is_written_as_one_register_of_spaces():
+    # Manual 003: a text access is 1 to 10 registers; a write of none is refused (found when
+    # a dump of a VLT 6000 whose display text was never set did not load back).
+    spec = VLT_PARAMETERS['vlt6000'][533]
+    assert encode_value(spec, '', VLT_CONVERSION_FACTORS) == [0x2020]
+    assert encode_value(spec, 'A', VLT_CONVERSION_FACTORS) == [0x4120]
+
+
 def test_manual_003_conversion_example_par_201_10_hz_is_100():
     spec = VLT_PARAMETERS['vlt6000'][201]
     assert encode_value(spec, 10, VLT_CONVERSION_FACTORS) == [100]
