@@ -74,6 +74,11 @@ class ServiceCalls:
             raise result
         return result
 
+    def waiting(self) -> bool:
+        """Return whether a call waits for the bus."""
+        with self._lock:
+            return bool(self._pending)
+
     def wake(self) -> None:
         """Look at the waiting calls soon: answer those the bus left waiting too long."""
         self._answers.trigger()

@@ -41,7 +41,9 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_parameter_events
 
 NODE_SUFFIX = '_parameters'
-TICK_S = 0.1  # the refresh and the give-up of waiting calls are looked at this often
+# The refresh and the give-up of waiting calls are looked at this often, while someone looks
+# at the parameters or a call waits for the bus; otherwise the timer is cancelled.
+TICK_S = 0.1
 MAX_REFRESH_PERIOD_S = 3600.0
 MAX_WATCH_WINDOW_S = 86400.0
 
@@ -74,7 +76,8 @@ class DeviceParameterNode:
         self._refresher = Refresher(
             self.device, lambda: float(self.node.get_parameter('refresh_period').value),
             lambda: float(self.node.get_parameter('refresh_while_watched').value))
-        ParameterServices(self.node, self.device, writer, self.calls, self._refresher.watched)
+        ParameterServices(self.node, self.device, writer, self.calls, self._watched)
+        # Runs only while needed (see _tick): an idle device costs its executor no wakeups.
         self._timer = self.node.create_timer(
             TICK_S, self._tick, callback_group=self.calls.callback_group,
             clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -114,9 +117,21 @@ class DeviceParameterNode:
         except Exception as error:  # noqa: B902 - the node is being destroyed: say so
             self.logger.debug(f'{self.full_name}: parameter event not published: {error}')
 
+    def _watched(self) -> None:
+        """Note a parameter service call (executor thread): refresh, and tick again."""
+        self._refresher.watched()
+        if self._timer.is_canceled():
+            self._timer.reset()
+
     def _tick(self) -> None:
-        self.calls.wake()  # answer calls the bus left waiting too long
+        if self.calls.waiting():
+            self.calls.wake()  # answer calls the bus left waiting too long
         self._refresher.tick()
+        # Nobody looks and no call waits (every call comes through _watched, which starts
+        # the timer again): nothing to do until the next call, so no wakeups (10 a second
+        # per device cost a node 1.3 % of a core per device, idle).
+        if not self._refresher.is_watched() and not self.calls.waiting():
+            self._timer.cancel()
 
     def close(self, reason: str) -> None:
         """Answer every call waiting for the bus (it is closed)."""
