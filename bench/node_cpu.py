@@ -171,6 +171,7 @@ def measure(window_s: float, baudrate: int, listen: List[str], calls_hz: float,
         after = thread_cpu.sample(node.pid)
         ended_s = time.monotonic()
         wire = line.wire_figures(started_s, ended_s)
+        requests = line.requests(started_s, ended_s)
         counters = line.pacer.counters()
     finally:
         for label, child in children.items():
@@ -181,7 +182,7 @@ def measure(window_s: float, baudrate: int, listen: List[str], calls_hz: float,
     rows = thread_cpu.shares(before, after, seconds, names)
     bus = [row for row in rows if row.name == BUS_THREAD] or rows[:1]
     return {'rows': rows, 'pid': node.pid, 'seconds': seconds, 'wire': wire,
-            'counters': counters, 'said': said, 'bus': bus[0],
+            'counters': counters, 'said': said, 'bus': bus[0], 'requests': requests,
             'total': thread_cpu.total_pct(rows)}
 
 

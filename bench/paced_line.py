@@ -71,6 +71,12 @@ class PacedSimulator:
         return {'rate': rate, 'fraction': fraction,
                 'limit': rate / fraction if fraction else 0.0}
 
+    def requests(self, started_s: float, ended_s: float) -> List[bytes]:
+        """Return the requests of the transactions in a window, oldest first, with CRCs."""
+        frames = [frame for frame in self.pacer.frames()
+                  if started_s <= frame.start_s and frame.end_s <= ended_s]
+        return [request.data for request, _ in transactions(frames)]
+
     def close(self) -> None:
         """Stop the pacer and the simulator."""
         self.pacer.stop()
