@@ -23,7 +23,11 @@ from drive_bridge.sim.pty_link import PtyLink
 from drive_bridge.sim.scheduled_writes import ScheduledWrites
 
 STALE_PARTIAL_FRAME_S = 0.05  # a partial frame older than this is dropped (pty has no gaps)
-SELECT_TIMEOUT_S = 0.005  # the longest wait of the serving loop for bytes or a due reply
+# The serving loop waits for bytes, the next due reply or the next partial frame going stale,
+# and at most this long: stop() and the actions run on the loop wake it through a pipe, so
+# an idle simulator does not wake (a 5 ms poll cost an idle simulator 2-3 % of a core).
+IDLE_WAIT_S = 1.0
+STALE_MARGIN_S = 0.001  # woken this long after a partial frame went stale (> its age)
 FRAMINGS = ('mbap', 'rtu')  # Modbus TCP's MBAP header, or the bytes as on a serial line
 
 
@@ -223,13 +227,23 @@ class LineServer:
                 action, done = self._loop_actions.pop(0)
                 action()
                 done.set()
-            timeout_s = self.writes.timeout_s(self.clock(), SELECT_TIMEOUT_S)
-            events = self._selector.select(timeout=timeout_s)
+            events = self._selector.select(timeout=self._wait_s())
             now = self.clock()
             for key, _ in events:
                 self._on_readable(key, now)
             self._flush_stale(now)
             self.writes.flush_due(self.clock())
+
+    def _wait_s(self) -> float:
+        """Return how long the loop may wait: until a reply is due or a partial frame stale."""
+        now = self.clock()
+        wait_s = self.writes.timeout_s(now, IDLE_WAIT_S)
+        for key in self._selector.get_map().values():
+            connection = key.data
+            if isinstance(connection, Connection) and connection.buffer:
+                stale_s = connection.last_byte_s + STALE_PARTIAL_FRAME_S + STALE_MARGIN_S
+                wait_s = min(wait_s, max(0.0, stale_s - now))
+        return wait_s
 
     def _on_readable(self, key, now: float) -> None:
         if key.data is None:
