@@ -13,7 +13,8 @@
 #     pymodbus 3.6.9              the other tests marked pymodbus, in .venv-pymodbus369
 #     ROS tier                    pytest in .venv, pytest-xdist workers
 # except on a free machine, where two pairs go side by side: the pymodbus 3.6.9 run beside
-# the integration tier, the docs and the installed commands beside the realtime tests.
+# the integration tier; the docs, the installed commands and the linters but flake8 (pep257,
+# the import contracts) beside the realtime tests.
 # A failing step does not stop the run: the other steps run, the table marks it FAILED and
 # the script exits 1. Arguments go to the pytest runs of the checkout (scripts/test.sh -x).
 # Workers per tier: UNIT_WORKERS, INTEGRATION_WORKERS, REALTIME_WORKERS, ROS_WORKERS; by
@@ -177,8 +178,9 @@ echo "pymodbus $("$VENV/bin/python" -c 'import pymodbus; print(pymodbus.__versio
 
 # The integration tier, its realtime tests, the pymodbus 3.6.9 run. On a free machine the
 # pymodbus 3.6.9 run goes beside the integration tier (both wait on the wire: 1.2 cores
-# together), and the docs and the installed commands (one core, about 10 s) beside the
-# realtime tests, which pass beside a CPU hog as well; on a busy machine one after another.
+# together), and the docs, the installed commands and the linters but flake8 (one core,
+# about 20 s) beside the realtime tests, which pass beside a CPU hog as well; on a busy
+# machine one after another.
 wire_steps() {
   if [ "$machine_free" = 1 ]; then
     step 'integration, pymodbus 3.6.9 beside' integration_tests "$@"
@@ -187,8 +189,8 @@ wire_steps() {
     beside_pid=$!
     step 'integration tier: realtime tests' realtime_tests "$@"
     # each step beside marks its own line FAILED; a lane that died before it could, here
-    wait "$beside_pid" || printf '%-34s %7s %7s  %s\n' 'docs, installed commands' '?' '?' \
-      FAILED >> "$steps"
+    wait "$beside_pid" || printf '%-34s %7s %7s  %s\n' 'docs, installed commands, linters' \
+      '?' '?' FAILED >> "$steps"
     echo '-- beside the realtime tests:'
     cat "$beside_log"
     return
@@ -225,10 +227,10 @@ integration_tests() {
 }
 # Tests whose threads must run within milliseconds: no CPU-bound workers beside them, at most
 # one process that keeps one core busy (they pass beside a CPU hog): on a free machine the
-# docs build and the installed commands, one after another. They wait on the clock, so a few
-# of them share the machine: the realtime workers, and beside them one process that runs the
-# ones marked pymodbus again with pymodbus 3.6.9 (three tests, about 15 s), one after
-# another.
+# docs build, the installed commands and the linters but flake8, one after another. They
+# wait on the clock, so a few of them share the machine: the realtime workers, and beside
+# them one process that runs the ones marked pymodbus again with pymodbus 3.6.9 (three
+# tests, about 15 s), one after another.
 realtime_tests() {
   local realtime369=(-m 'pymodbus and realtime' test/integration "$@")
   pytest_beside_369 'the same marked pymodbus' realtime369 \
@@ -240,10 +242,18 @@ mkdir -p "$workspace/src/drive_bridge"
 git -C "$root" ls-files -z --cached --others --exclude-standard \
   | (cd "$root" && xargs -0 cp --parents -t "$workspace/src/drive_bridge")
 workspace_colcon() { (cd "$workspace" && "$VENV/bin/colcon" --log-base log "$@"); }
+# colcon_test MARKS: the unit tier and the linters the marker expression MARKS selects.
 colcon_test() {
   workspace_colcon test --return-code-on-test-failure --event-handlers console_direct+ \
-    --pytest-args -n "$unit_workers" -m 'unit or linter' --timeout 900 \
+    --pytest-args -n "$unit_workers" -m "$1" --timeout 900 \
     && workspace_colcon test-result --all
+}
+# The linters but flake8 (pep257, the import contracts: one process) as colcon test runs
+# them, in the workspace's copy of the package.
+other_linters() {
+  (cd "$workspace/src/drive_bridge" \
+    && "$VENV/bin/python" -m pytest -q -p no:cacheprovider -m 'linter and not flake8' \
+      test/test_pep257.py test/test_import_contracts.py)
 }
 compute_steps() {
   # Alone, before the tests with deadlines: beside them in the idle scheduling class (or at
@@ -257,7 +267,11 @@ compute_steps() {
       "$workspace/install"
     # The unit tier and the linters run here only, against the install space; the
     # integration and ROS tiers run from the checkout only (docs/contributing.md).
-    step 'colcon test: unit tier, linters' colcon_test
+    if [ "$machine_free" = 1 ]; then  # the other linters beside the realtime tests
+      step 'colcon test: unit tier, flake8' colcon_test 'unit or flake8'
+    else
+      step 'colcon test: unit tier, linters' colcon_test 'unit or linter'
+    fi
   fi
 }
 # On a free machine, beside the realtime tests: one process at a time, one core.
@@ -268,6 +282,7 @@ compute_beside_realtime() {
     step 'installed commands, beside them' scripts/check_install.sh "$workspace/install" \
       || status=1
   fi
+  step 'pep257, import contracts, beside' other_linters || status=1
   return $status
 }
 built=0
