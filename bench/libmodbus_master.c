@@ -72,7 +72,7 @@ int main(int argc, char **argv)
   }
   struct sigaction action;
   memset(&action, 0, sizeof(action));
-  action.sa_handler = stop;  /* no SA_RESTART: a wait in select ends at once */
+  action.sa_handler = stop;  /* libmodbus retries a select cut by it: ends within 0.5 s */
   sigaction(SIGTERM, &action, NULL);
   modbus_t *context = modbus_new_rtu(argv[1], atoi(argv[2]), argv[3][0], 8, atoi(argv[4]));
   if (context == NULL || modbus_connect(context) == -1) {
@@ -80,7 +80,6 @@ int main(int argc, char **argv)
     return 1;
   }
   modbus_set_response_timeout(context, 0, 500000);
-  modbus_set_debug(context, getenv("LIBMODBUS_MASTER_DEBUG") != NULL);
   printf("ready\n");
   fflush(stdout);
   long gap_us = atol(argv[5]);

@@ -53,8 +53,9 @@ def build_peer(directory: str) -> Optional[str]:
     built = subprocess.run([compiler, '-O2', '-o', binary, SOURCE, *flags],
                            capture_output=True, text=True)
     if built.returncode != 0:
-        print('peer skipped: libmodbus_master.c does not build (apt install libmodbus-dev): ' +
-              built.stderr.strip().splitlines()[-1] if built.stderr.strip() else '')
+        said = built.stderr.strip().splitlines()
+        print('peer skipped: libmodbus_master.c does not build (apt install libmodbus-dev)' +
+              (f': {said[-1]}' if said else ''))
         return None
     return binary
 

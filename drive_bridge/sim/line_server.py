@@ -235,14 +235,21 @@ class LineServer:
             self.writes.flush_due(self.clock())
 
     def _wait_s(self) -> float:
-        """Return how long the loop may wait: until a reply is due or a partial frame stale."""
+        """
+        Return how long the loop may wait: until a reply is due or a partial frame goes stale.
+
+        A partial frame already handed over as stale and kept (Modbus TCP's handler keeps a
+        partial frame until the rest comes) does not shorten the wait: only its next bytes
+        can change it, and they wake the loop.
+        """
         now = self.clock()
         wait_s = self.writes.timeout_s(now, IDLE_WAIT_S)
         for key in self._selector.get_map().values():
             connection = key.data
             if isinstance(connection, Connection) and connection.buffer:
                 stale_s = connection.last_byte_s + STALE_PARTIAL_FRAME_S + STALE_MARGIN_S
-                wait_s = min(wait_s, max(0.0, stale_s - now))
+                if stale_s > now:
+                    wait_s = min(wait_s, stale_s - now)
         return wait_s
 
     def _on_readable(self, key, now: float) -> None:

@@ -82,6 +82,23 @@ def test_a_call_refreshes_for_the_window_then_the_refresh_stops_and_forgets():
     assert len(device.reads) > reads
 
 
+def test_active_until_the_tick_that_forgets():
+    # The parameter node cancels its timer when the refresher is no longer active: that must
+    # be the tick that forgot the values, not a look at the clock after it (a window that
+    # closed between the two would have left its values held, then served as current).
+    device = Device()
+    refresh, now = refresher(device, period_s=0.5, window_s=1.0)
+    assert not refresh.active  # nobody looked yet: the timer may stop
+    refresh.watched()
+    assert refresh.active
+    run(refresh, now, 1.0)
+    assert len(device.cache) > 0 and refresh.active
+    now[0] += 0.5  # the window closed, no tick yet
+    assert not refresh.is_watched() and refresh.active  # still active: a tick has work
+    refresh.tick()
+    assert not refresh.active and len(device.cache) == 0
+
+
 def test_values_not_held_are_read_first():
     device = Device()
     refresh, now = refresher(device, period_s=0.5)

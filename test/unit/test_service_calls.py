@@ -77,6 +77,16 @@ def test_the_bus_s_answer_reaches_the_awaiting_service_through_the_guard():
     assert call.outcome == 'start acknowledged'
 
 
+def test_each_call_that_begins_to_wait_is_told():
+    # The parameter nodes start their tick timer again on it (the give-up is looked at).
+    node, calls = bench()
+    told = []
+    calls.on_waiting = lambda: told.append(calls.waiting())
+    Call(calls, Future())
+    Call(calls, Future())
+    assert told == [True, True]
+
+
 def test_a_refusal_is_raised_in_the_service():
     node, calls = bench()
     bus_future = Future()

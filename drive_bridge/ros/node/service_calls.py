@@ -60,12 +60,14 @@ class ServiceCalls:
         self.callback_group = ReentrantCallbackGroup()
         self._answers = node.create_guard_condition(self._deliver,
                                                     callback_group=self.callback_group)
+        self.on_waiting: Callable[[], None] = lambda: None  # a call began to wait (executor)
 
     async def answer_of(self, bus_future: Future, label: str, give_up_s: float) -> str:
         """Await the bus's answer (executor thread); raise its error, or ours on giving up."""
         call = PendingCall(bus_future, label, time.monotonic() + give_up_s)
         with self._lock:
             self._pending.append(call)
+        self.on_waiting()
         bus_future.add_done_callback(lambda done: self._answers.trigger())
         if bus_future.done():
             self._answers.trigger()

@@ -48,6 +48,11 @@ class Refresher:
         self._watched_s = self._clock()
         self._watching = True
 
+    @property
+    def active(self) -> bool:
+        """Return whether the last tick found the window open (later ticks have work)."""
+        return self._watching
+
     def is_watched(self) -> bool:
         """Return whether the last service call is within the window."""
         return self._clock() - self._watched_s <= self._window_s()
