@@ -204,12 +204,8 @@ def run_case(baudrate: int, window_s: float, joints: bool, client: Optional[str]
             assert helper.stdout.readline().strip() == 'client ready'
         wait_for(lambda: False, WARM_UP_S)
         names = thread_cpu.python_thread_names(node.pid)
-        started_s = time.monotonic()
-        before = thread_cpu.sample(node.pid)
-        time.sleep(window_s)
-        after = thread_cpu.sample(node.pid)
-        ended_s = time.monotonic()
-        wire = line.wire_figures(started_s, ended_s)
+        window = thread_cpu.measure_window(node.pid, window_s)
+        wire = line.wire_figures(window.started_s, window.ended_s)
         rates = {}
         if helper is not None:
             rates = json.loads(helper.stdout.readline())
@@ -220,7 +216,7 @@ def run_case(baudrate: int, window_s: float, joints: bool, client: Optional[str]
             helper.stdout.close()
         node.stop()
         line.close()
-    rows = thread_cpu.shares(before, after, ended_s - started_s, names)
+    rows = window.shares(names)
     shares = thread_cpu.by_name(rows)
     figures = {'cpu': thread_cpu.total_pct(rows), 'wire': wire['rate'],
                'states': rates.get('states', 0.0), 'commands': rates.get('commands', 0.0),

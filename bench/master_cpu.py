@@ -73,17 +73,13 @@ def measure_peer(binary: str, requests: List[bytes], window_s: float, baudrate: 
         if said != 'ready':
             raise RuntimeError(f'the libmodbus master did not start: {said}')
         time.sleep(node_cpu.WARM_UP_S)
-        started_s = time.monotonic()
-        before = thread_cpu.sample(peer.pid)
-        time.sleep(window_s)
-        after = thread_cpu.sample(peer.pid)
-        ended_s = time.monotonic()
-        wire = line.wire_figures(started_s, ended_s)
+        window = thread_cpu.measure_window(peer.pid, window_s)
+        wire = line.wire_figures(window.started_s, window.ended_s)
     finally:
         peer.terminate()
         output, _ = peer.communicate(timeout=10)
         line.close()
-    rows = thread_cpu.shares(before, after, ended_s - started_s, {})
+    rows = window.shares({})
     return {'total': thread_cpu.total_pct(rows), 'wire': wire, 'said': output.strip()}
 
 

@@ -165,21 +165,17 @@ def measure(window_s: float, baudrate: int, listen: List[str], calls_hz: float,
                                              ready='calling')
         wait_for(lambda: False, WARM_UP_S)
         names = thread_cpu.python_thread_names(node.pid)
-        started_s = time.monotonic()
-        before = thread_cpu.sample(node.pid)
-        time.sleep(window_s)
-        after = thread_cpu.sample(node.pid)
-        ended_s = time.monotonic()
-        wire = line.wire_figures(started_s, ended_s)
-        requests = line.requests(started_s, ended_s)
+        window = thread_cpu.measure_window(node.pid, window_s)
+        wire = line.wire_figures(window.started_s, window.ended_s)
+        requests = line.requests(window.started_s, window.ended_s)
         counters = line.pacer.counters()
     finally:
         for label, child in children.items():
             said[label] = stop_child(child)
         node.stop()
         line.close()
-    seconds = ended_s - started_s
-    rows = thread_cpu.shares(before, after, seconds, names)
+    seconds = window.seconds
+    rows = window.shares(names)
     bus = [row for row in rows if row.name == BUS_THREAD] or rows[:1]
     return {'rows': rows, 'pid': node.pid, 'seconds': seconds, 'wire': wire,
             'counters': counters, 'said': said, 'bus': bus[0], 'requests': requests,

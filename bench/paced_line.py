@@ -16,7 +16,8 @@ import time
 from typing import Dict, List, Sequence, Tuple
 
 from drive_bridge.config.params_file import write_params_file
-from drive_bridge.sim.wire_pacer import LineTiming, transactions, wire_fraction, WirePacer
+from drive_bridge.sim.wire_pacer import (
+    LineTiming, transactions, wire_fraction, WireFrame, WirePacer)
 
 TEST_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'test')
 
@@ -60,11 +61,14 @@ class PacedSimulator:
                 return pty_path
         raise RuntimeError(f'the simulator exited with {self.process.wait()}')
 
+    def transactions(self, started_s: float, ended_s: float) -> List[Tuple[WireFrame, WireFrame]]:
+        """Return the (request, reply) pairs whose frames lie wholly within a window."""
+        return transactions([frame for frame in self.pacer.frames()
+                             if started_s <= frame.start_s and frame.end_s <= ended_s])
+
     def wire_figures(self, started_s: float, ended_s: float) -> Dict[str, float]:
         """Return what the frame log shows in a window: transactions/s, wire fraction, limit."""
-        frames = [frame for frame in self.pacer.frames()
-                  if started_s <= frame.start_s and frame.end_s <= ended_s]
-        pairs = transactions(frames)
+        pairs = self.transactions(started_s, ended_s)
         seconds = ended_s - started_s
         fraction = wire_fraction(pairs, self.timing, seconds)
         rate = len(pairs) / seconds
@@ -73,9 +77,7 @@ class PacedSimulator:
 
     def requests(self, started_s: float, ended_s: float) -> List[bytes]:
         """Return the requests of the transactions in a window, oldest first, with CRCs."""
-        frames = [frame for frame in self.pacer.frames()
-                  if started_s <= frame.start_s and frame.end_s <= ended_s]
-        return [request.data for request, _ in transactions(frames)]
+        return [request.data for request, _ in self.transactions(started_s, ended_s)]
 
     def close(self) -> None:
         """Stop the pacer and the simulator."""

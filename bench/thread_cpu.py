@@ -18,6 +18,7 @@ import platform
 import re
 import shutil
 import subprocess
+import time
 from typing import Dict, List, Optional
 
 PY_SPY_CANDIDATES = ('/tmp/pyspy/bin/py-spy',)
@@ -131,6 +132,33 @@ def shares(before: Dict[int, ThreadSample], after: Dict[int, ThreadSample], seco
                                 (now.voluntary - then.voluntary) / seconds,
                                 (now.involuntary - then.involuntary) / seconds))
     return sorted(rows, key=lambda row: row.cpu_pct, reverse=True)
+
+
+@dataclass(frozen=True)
+class Window:
+    """A process's per-thread counters at the start and the end of a measurement window."""
+
+    started_s: float  # time.monotonic()
+    ended_s: float
+    before: Dict[int, ThreadSample]
+    after: Dict[int, ThreadSample]
+
+    @property
+    def seconds(self) -> float:
+        return self.ended_s - self.started_s
+
+    def shares(self, names: Dict[int, str]) -> List[ThreadShare]:
+        """Return each thread's share over the window (:func:`shares`)."""
+        return shares(self.before, self.after, self.seconds, names)
+
+
+def measure_window(pid: int, window_s: float) -> Window:
+    """Sample process ``pid`` now and ``window_s`` later (sleeping meanwhile)."""
+    started_s = time.monotonic()
+    before = sample(pid)
+    time.sleep(window_s)
+    after = sample(pid)
+    return Window(started_s, time.monotonic(), before, after)
 
 
 def total_pct(rows: List[ThreadShare]) -> float:
