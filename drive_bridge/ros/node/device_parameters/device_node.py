@@ -129,7 +129,9 @@ class DeviceParameterNode:
             self._timer.reset()
 
     def _tick(self) -> None:
-        if self.calls.waiting():
+        # Calls begin to wait only in callbacks of this thread: none begins during the tick.
+        waiting = self.calls.waiting()
+        if waiting:
             self.calls.wake()  # answer calls the bus left waiting too long
         self._refresher.tick()
         # The window closed at this tick or before (the refresher forgot its values) and no
@@ -137,7 +139,7 @@ class DeviceParameterNode:
         # again, so no wakeups (10 a second per device cost a node 1.3 % of a core per
         # device, idle). Decided by what this tick found, not by the clock again: a window
         # that closed between the two would leave its values held.
-        if not self._refresher.active and not self.calls.waiting():
+        if not self._refresher.active and not waiting:
             self._timer.cancel()
 
     def close(self, reason: str) -> None:
