@@ -11,7 +11,10 @@ line of the same timing. Both are measured over the same window from the schedul
 accounting (whole process, every thread) and the pacer's frame log: transactions a second,
 CPU per transaction, the wire fraction (the transactions' wire time, gaps included, over the
 window). The ratio is the node's CPU per transaction over the peer's: the goal of issue 43
-is 1.0 or less. Skipped, saying what to install, where ``cc`` or libmodbus is missing.
+is 1.0 or less. The C peer is skipped, saying what to install, where ``cc`` or libmodbus is
+missing. A second peer, ``python_master.py``, is the floor of any master in CPython (one
+write, one wait, one read and the gap a transaction, nothing checked) on the same line and
+requests: the node's ratio to it is what the package's own code costs.
 Run: .venv/bin/python bench/master_cpu.py [window seconds] [--baud 19200 --baud 115200]
 [--runs 1] [--compare LABEL=DIR ...]
 """
@@ -32,7 +35,9 @@ from paced_line import conditions, LINE_DEVICES, PacedSimulator, simulator_devic
 import rclpy
 import thread_cpu
 
-SOURCE = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'libmodbus_master.c')
+HERE = os.path.dirname(os.path.abspath(__file__))
+SOURCE = os.path.join(HERE, 'libmodbus_master.c')
+PYTHON_FLOOR = [sys.executable, os.path.join(HERE, 'python_master.py')]
 REPLAYED = 64  # requests of the node's the peer sends in turn (at most 64: the helper's)
 BAUDRATES = (19200, 115200)
 
@@ -60,18 +65,19 @@ def build_peer(directory: str) -> Optional[str]:
     return binary
 
 
-def measure_peer(binary: str, requests: List[bytes], window_s: float, baudrate: int) -> Dict:
-    """Run the C master on a fresh paced line with ``requests`` (CRCs cut) for one window."""
+def measure_peer(command: List[str], requests: List[bytes], window_s: float,
+                 baudrate: int) -> Dict:
+    """Run a peer master on a fresh paced line with ``requests`` (CRCs cut) for one window."""
     timing = LineTiming(baudrate, 'E', 1)
     line = PacedSimulator(simulator_devices(LINE_DEVICES), timing)
     gap_us = str(round(timing.gap_s * 1e6))
-    peer = subprocess.Popen([binary, line.path, str(baudrate), 'N', '2', gap_us,
+    peer = subprocess.Popen([*command, line.path, str(baudrate), 'N', '2', gap_us,
                              *(request[:-2].hex() for request in requests)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         said = peer.stdout.readline().strip()
         if said != 'ready':
-            raise RuntimeError(f'the libmodbus master did not start: {said}')
+            raise RuntimeError(f'{command[-1]} did not start: {said}')
         time.sleep(node_cpu.WARM_UP_S)
         window = thread_cpu.measure_window(peer.pid, window_s)
         wire = line.wire_figures(window.started_s, window.ended_s)
@@ -131,17 +137,19 @@ def main() -> None:
                     node_runs.append((label, node_cpu.measure(
                         arguments.window_s, baudrate, [], 0.0, source)))
                     print(describe(f'drive_bridge_node {label}'.strip(), node_runs[-1][1]))
-                if binary is None:
-                    continue
                 requests = node_runs[0][1]['requests'][-REPLAYED:]
-                peer = measure_peer(binary, requests, arguments.window_s, baudrate)
-                print(describe('libmodbus 3.1 master (C)', peer) + f'  ({peer["said"]})')
+                peers = [('libmodbus', 'libmodbus 3.1 master (C)', [binary])] if binary else []
+                peers.append(('Python floor', 'Python floor (no checks)', PYTHON_FLOOR))
+                for short, long, command in peers:
+                    peer = measure_peer(command, requests, arguments.window_s, baudrate)
+                    print(describe(long, peer) + f'  ({peer["said"]})')
+                    for label, result in node_runs:
+                        ratio = per_transaction_us(result) / per_transaction_us(peer)
+                        key = f'{baudrate} node{" " + label if label else ""} / {short}'
+                        ratios.setdefault(key, []).append(ratio)
+                        print(f'    ratio {key.split(" ", 1)[1]}, CPU a transaction: '
+                              f'{ratio:.2f}')
                 print(f'    replayed: {frame_sizes(requests)}')
-                for label, result in node_runs:
-                    ratio = per_transaction_us(result) / per_transaction_us(peer)
-                    ratios.setdefault(f'{baudrate} {label}'.strip(), []).append(ratio)
-                    print(f'    ratio node{" " + label if label else ""} / libmodbus, CPU a '
-                          f'transaction: {ratio:.2f}')
     finally:
         rclpy.try_shutdown()
         shutil.rmtree(directory, ignore_errors=True)
