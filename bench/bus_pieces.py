@@ -1,24 +1,26 @@
 """
 Benchmark: where a transaction's CPU goes in the bus thread, piece by piece (issue 43).
 
-The bus alone (``BusMaster``, no ROS) polls 4 MCD 500 and 4 FC 51 at 100 Hz on a line paced
-by the wire pacer (as ``node_cpu.py``), with the methods of each piece wrapped so that the
-thread's CPU time (``time.thread_time``) spent inside it, less the pieces it calls, is added
-to the piece: the port's system calls (``select``, ``read``, ``write``, ``tcsetattr`` and
-the one ``ioctl`` that sets VMIN), the port's Python (``transport/serial_port``), the line
-discipline (``exchange``, ``reply_window``), the framer and codecs, the poll cycle (the
-device profile building requests and decoding replies), the runner, scheduling, health and
-the deadman, and the hand-off of events. Printed per transaction on the wire, with the calls
-a transaction makes, the wrappers' own cost (measured here and taken off each piece by its
-calls) and the bus thread's CPU without the wrappers in a second window. The pacer runs in
-this process (its thread shares the interpreter), so the figures are for comparing pieces
-and versions on one machine, not for the node's total (``node_cpu.py``, ``master_cpu.py``).
-To compare two versions run it with each on ``PYTHONPATH``.
+The bus alone (``BusMaster``, no ROS, no listener) polls 4 MCD 500 and 4 FC 51 at 100 Hz on
+a line paced by the wire pacer (as ``node_cpu.py``). A first bus runs one window as it is:
+its thread's CPU a transaction (``time.thread_time``) is the total. A second bus on the same
+line then runs one window with the methods of each piece wrapped, so that the thread's CPU
+spent inside a piece, less the pieces it calls, is added to it: the port's system calls
+(``select``, ``read``, ``write``, ``tcsetattr`` for VMIN), the port's Python
+(``transport/serial_port``), the line discipline (``exchange``, ``reply_window``), the
+framer and codecs, the poll cycle (the device profile building requests and decoding
+replies), the runner, scheduling, health and the deadman, and the hand-off of events. A
+wrapper's own bookkeeping after the call is kept out of the caller's piece; what the
+wrappers cost in all is the difference between the two windows, printed beside the table
+(it falls mostly on the pieces with many calls). Figures are per transaction on the wire,
+with the calls a transaction makes. The pacer runs in this process (its thread shares the
+interpreter), so the figures are for comparing pieces and versions on one machine, not for
+the node's total (``node_cpu.py``, ``master_cpu.py``). To compare two versions run it with
+each on ``PYTHONPATH``.
 Run: .venv/bin/python bench/bus_pieces.py [window seconds] [baud rate, default 19200]
 """
 
 import argparse
-import fcntl
 import os
 import select
 import sys
@@ -53,8 +55,8 @@ class Pieces:
 
         def wrapped(*args, **kwargs):
             stack = local.__dict__.setdefault('nested', [])
-            started = clock()
             stack.append(0.0)
+            started = clock()
             try:
                 return function(*args, **kwargs)
             finally:
@@ -62,8 +64,8 @@ class Pieces:
                 inner = stack.pop()
                 cpu_s[piece] = cpu_s.get(piece, 0.0) + elapsed - inner
                 calls[piece] = calls.get(piece, 0) + 1
-                if stack:
-                    stack[-1] += elapsed
+                if stack:  # the caller's piece excludes this call and its bookkeeping
+                    stack[-1] += clock() - started
         return wrapped
 
     def wrap_methods(self, cls: type, names: Tuple[str, ...], piece: str) -> None:
@@ -74,26 +76,6 @@ class Pieces:
                 setattr(cls, name, staticmethod(self.wrap(piece, raw.__func__)))
             else:
                 setattr(cls, name, self.wrap(piece, raw))
-
-    def snapshot(self) -> Tuple[Dict[str, float], Dict[str, int]]:
-        """Return copies of the CPU and calls so far."""
-        return dict(self.cpu_s), dict(self.calls)
-
-
-def wrapper_cost_s(pieces: Pieces, rounds: int = 20000) -> float:
-    """Return the CPU one wrapped call adds (two clock reads and the bookkeeping)."""
-    probe = pieces.wrap('probe', lambda: None)
-    started = time.thread_time()
-    for _ in range(rounds):
-        probe()
-    wrapped_s = time.thread_time() - started
-    plain = (lambda: None)
-    started = time.thread_time()
-    for _ in range(rounds):
-        plain()
-    plain_s = time.thread_time() - started
-    pieces.cpu_s.pop('probe'), pieces.calls.pop('probe')
-    return max(0.0, (wrapped_s - plain_s) / rounds)
 
 
 def install(pieces: Pieces) -> None:
@@ -107,11 +89,9 @@ def install(pieces: Pieces) -> None:
     serial_port.os = types.SimpleNamespace(
         read=wrap(PORT_CALLS + 'read', os.read), write=wrap(PORT_CALLS + 'write', os.write),
         name=os.name, set_blocking=os.set_blocking)
-    serial_port.fcntl = types.SimpleNamespace(ioctl=wrap(PORT_CALLS + 'ioctl, tcsetattr',
-                                                         fcntl.ioctl))
     serial_port.termios = types.SimpleNamespace(**{
         name: getattr(termios, name) for name in dir(termios) if not name.startswith('_')})
-    serial_port.termios.tcsetattr = wrap(PORT_CALLS + 'ioctl, tcsetattr', termios.tcsetattr)
+    serial_port.termios.tcsetattr = wrap(PORT_CALLS + 'tcsetattr (VMIN)', termios.tcsetattr)
     pieces.wrap_methods(serial_port.SerialLine, (
         'read', 'write', 'wait_quiet', '_read_descriptor', '_set_vmin'),
         'transport: the port (serial_port)')
@@ -158,27 +138,18 @@ def run_window(bus: BusMaster, window_s: float) -> Tuple[int, float, float, floa
             time.monotonic())
 
 
-def table(pieces: Pieces, before: Tuple[Dict, Dict], transactions: int, wrapper_s: float,
+def table(pieces: Pieces, transactions: int, wrapped_us: float,
           unwrapped_us: float) -> List[str]:
-    """
-    Return the per-piece lines: CPU a transaction, calls a transaction.
-
-    The first figure has the wrappers' measured cost taken off (a call in a tight loop: it
-    costs more between system calls, with cold caches); the second scales the pieces to the
-    bus thread's CPU without wrappers, as the share of each.
-    """
-    cpu_s, calls = pieces.snapshot()
-    rows = []
-    for piece, total_s in cpu_s.items():
-        count = calls[piece] - before[1].get(piece, 0)
-        spent_s = total_s - before[0].get(piece, 0.0) - count * wrapper_s
-        rows.append((spent_s / transactions * 1e6, count / transactions, piece))
-    rows.sort(reverse=True)
+    """Return the per-piece lines (us of CPU and calls a transaction) and the totals."""
+    rows = sorted(((spent_s / transactions * 1e6, pieces.calls[piece] / transactions, piece)
+                   for piece, spent_s in pieces.cpu_s.items()), reverse=True)
+    lines = ['       us  calls  piece (a transaction)']
+    lines += [f'  {us:7.1f}  {calls:5.2f}  {piece}' for us, calls, piece in rows]
     total_us = sum(row[0] for row in rows)
-    scale = unwrapped_us / total_us if total_us > 0 else 0.0
-    lines = ['  wrapped  scaled  calls  piece (us of CPU and calls a transaction)']
-    lines += [f'  {us:7.1f} {us * scale:7.1f}  {calls:5.2f}  {piece}' for us, calls, piece in rows]
-    lines.append(f'  {total_us:7.1f} {unwrapped_us:7.1f}         total')
+    lines.append(f'  {total_us:7.1f}         the pieces (wrapped bus: {wrapped_us:.1f}; the '
+                 f'rest: outside any piece, or the calls of the wrappers)')
+    lines.append(f'  {unwrapped_us:7.1f}         the bus without wrappers (the wrappers cost '
+                 f'{wrapped_us - unwrapped_us:.1f})')
     return lines
 
 
@@ -199,20 +170,20 @@ def main() -> None:
         bus = bus_on_line(line.path, arguments.baudrate)
         run_window(bus, WARM_UP_S)
         count, cpu_s, started_s, ended_s = run_window(bus, arguments.window_s)
+        bus.shutdown(stop_motors=False)
         wire = line.wire_figures(started_s, ended_s)
         unwrapped_us = cpu_s / count * 1e6
         print(f'without wrappers: {count / (ended_s - started_s):.1f} transactions/s, '
               f'{unwrapped_us:.0f} us of bus thread CPU a transaction, wire '
               f'{wire["fraction"]:.1%}')
         pieces = Pieces()
-        wrapper_s = wrapper_cost_s(pieces)
-        install(pieces)
-        run_window(bus, WARM_UP_S / 2)
-        before = pieces.snapshot()
+        install(pieces)  # before the second bus: it keeps bound methods (the hand-off)
+        bus = bus_on_line(line.path, arguments.baudrate)
+        run_window(bus, WARM_UP_S)
+        pieces.cpu_s.clear()
+        pieces.calls.clear()
         count, cpu_s, _, _ = run_window(bus, arguments.window_s)
-        print(f'with wrappers: {cpu_s / count * 1e6:.0f} us a transaction; a wrapped call '
-              f'costs {wrapper_s * 1e6:.2f} us in a tight loop, taken off each piece:')
-        print('\n'.join(table(pieces, before, count, wrapper_s, unwrapped_us)))
+        print('\n'.join(table(pieces, count, cpu_s / count * 1e6, unwrapped_us)))
     finally:
         if bus is not None:
             bus.shutdown(stop_motors=False)

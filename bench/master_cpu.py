@@ -12,9 +12,10 @@ accounting (whole process, every thread) and the pacer's frame log: transactions
 CPU per transaction, the wire fraction (the transactions' wire time, gaps included, over the
 window). The ratio is the node's CPU per transaction over the peer's: the goal of issue 43
 is 1.0 or less. The C peer is skipped, saying what to install, where ``cc`` or libmodbus is
-missing. A second peer, ``python_master.py``, is the floor of any master in CPython (one
-write, one wait, one read and the gap a transaction, nothing checked) on the same line and
-requests: the node's ratio to it is what the package's own code costs.
+missing. A second peer, ``python_master.py``, is a minimal CPython master (one write, one
+wait, one read and the gap a transaction; only the reply's length and CRC checked) on the
+same line and requests: its ratio to libmodbus is what CPython itself costs, the node's ratio
+to it what the package's own code costs.
 Run: .venv/bin/python bench/master_cpu.py [window seconds] [--baud 19200 --baud 115200]
 [--runs 1] [--compare LABEL=DIR ...]
 """
@@ -111,6 +112,32 @@ def frame_sizes(requests: List[bytes]) -> str:
             f', {statistics.mean(len(request) for request in requests):.1f} bytes on average')
 
 
+def run_peers(binary: Optional[str], node_runs: List, window_s: float, baudrate: int,
+              ratios: Dict[str, List[float]]) -> None:
+    """Run the peers on the node's requests; print each and add the ratios to ``ratios``."""
+    requests = node_runs[0][1]['requests'][-REPLAYED:]
+    peers = [('libmodbus', 'libmodbus 3.1 master (C)', [binary])] if binary else []
+    peers.append(('Python floor', 'Python floor (length, CRC)', PYTHON_FLOOR))
+    measured = []
+    for short, long, command in peers:
+        measured.append((short, measure_peer(command, requests, window_s, baudrate)))
+        print(describe(long, measured[-1][1]) + f'  ({measured[-1][1]["said"]})')
+        for label, result in node_runs:
+            add_ratio(ratios, f'{baudrate} node{" " + label if label else ""} / {short}',
+                      result, measured[-1][1])
+    if len(measured) == 2:
+        add_ratio(ratios, f'{baudrate} Python floor / libmodbus', measured[1][1],
+                  measured[0][1])
+    print(f'    replayed: {frame_sizes(requests)}')
+
+
+def add_ratio(ratios: Dict[str, List[float]], key: str, over: Dict, under: Dict) -> None:
+    """Print and keep the ratio of two measurements' CPU a transaction under ``key``."""
+    ratio = per_transaction_us(over) / per_transaction_us(under)
+    ratios.setdefault(key, []).append(ratio)
+    print(f'    ratio {key.split(" ", 1)[1]}, CPU a transaction: {ratio:.2f}')
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('window_s', nargs='?', type=float, default=10.0)
@@ -137,19 +164,7 @@ def main() -> None:
                     node_runs.append((label, node_cpu.measure(
                         arguments.window_s, baudrate, [], 0.0, source)))
                     print(describe(f'drive_bridge_node {label}'.strip(), node_runs[-1][1]))
-                requests = node_runs[0][1]['requests'][-REPLAYED:]
-                peers = [('libmodbus', 'libmodbus 3.1 master (C)', [binary])] if binary else []
-                peers.append(('Python floor', 'Python floor (no checks)', PYTHON_FLOOR))
-                for short, long, command in peers:
-                    peer = measure_peer(command, requests, arguments.window_s, baudrate)
-                    print(describe(long, peer) + f'  ({peer["said"]})')
-                    for label, result in node_runs:
-                        ratio = per_transaction_us(result) / per_transaction_us(peer)
-                        key = f'{baudrate} node{" " + label if label else ""} / {short}'
-                        ratios.setdefault(key, []).append(ratio)
-                        print(f'    ratio {key.split(" ", 1)[1]}, CPU a transaction: '
-                              f'{ratio:.2f}')
-                print(f'    replayed: {frame_sizes(requests)}')
+                run_peers(binary, node_runs, arguments.window_s, baudrate, ratios)
     finally:
         rclpy.try_shutdown()
         shutil.rmtree(directory, ignore_errors=True)

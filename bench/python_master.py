@@ -1,15 +1,16 @@
 """
-The floor of a Modbus RTU master in CPython: the least a Python master can do per transaction.
+A minimal Modbus RTU master in CPython: about the least a Python master can do a transaction.
 
-The second peer of ``master_cpu.py`` (beside libmodbus): it sends a fixed list of requests in
-turn, as fast as the line answers, and does per transaction only what no master can skip:
-one ``write``, the terminal's ``VMIN`` set to the whole reply's length (known from the
-request; a change of length costs a ``tcsetattr``), one ``select`` until the reply is
-there, one ``read``, the CRC checked, then one sleep for the 3.5-character gap before the
-next request. No line discipline, no late-reply checks, no scheduling, no decoding, no
+The second peer of ``master_cpu.py`` (beside libmodbus). It sends a fixed list of requests
+in turn, as fast as the line answers, and does per transaction only what no master can
+skip: one ``write``, the terminal's ``VMIN`` set to the whole reply's length (known from the
+request; a change of length costs a ``tcsetattr``), one ``select`` until the reply is there,
+one ``read``, the reply's length and CRC checked, then one sleep for the 3.5-character gap
+before the next request. The requests' CRCs are computed once at the start. No line
+discipline, no check of the reply's unit, function or count, no scheduling, no decoding, no
 exception replies (a 5-byte exception would wait for the timeout): it is not a master to
-use, only the cost that CPython itself puts under any master on this machine. Test-only
-code (the bench's), never the package's.
+use, only one minimal design, the cost that CPython puts under any master on this machine.
+Test-only code (the bench's), never the package's.
 
 Usage (as libmodbus_master.c): python_master.py PORT BAUD PARITY STOP GAP_US HEX_REQUEST...
 Prints "ready", then at SIGTERM "answered N failed F".
@@ -36,7 +37,9 @@ def reply_length(request: bytes) -> int:
         return 5 + (count + 7) // 8
     if function in (3, 4):
         return 5 + 2 * count
-    return 8  # the echo of a write
+    if function in (5, 6, 15, 16):
+        return 8  # the echo of a write
+    raise ValueError(f'function 0x{function:02x}: not a request this floor knows the reply of')
 
 
 def main(arguments) -> int:
