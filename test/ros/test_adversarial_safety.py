@@ -672,6 +672,41 @@ def test_auto_start_stream_does_not_restart_a_drive_after_an_outage(tmp_path):
         assert probe.start_edges() == 2
 
 
+def test_auto_start_stream_does_not_start_a_drive_when_control_returns(tmp_path):
+    """
+    auto_start, armed; allow_control false at runtime; the stream turns nonzero, refused.
+
+    When control comes back the nonzero command is one that was already there: it starts
+    nothing (found by an adversarial probe: the drive started 19 ms after control
+    returned). Zero and back is a new request, and starts it.
+    """
+    rig = make_rig('fc', velocity_scale=SCALE, command_mode='auto_start')
+    server, probe = rig.server, rig.probe
+    with Session(rig, tmp_path / 'control_back_auto.yaml') as session:
+        client = session.client
+        assert client.wait_state(rig.name, 'ready', READY_S)
+        velocity, timer = zero_first_stream(client, rig)
+        assert client.set_parameter(f'{rig.name}.allow_control', False).successful
+        velocity[0] = 5.0  # refused while monitor-only (the stream goes on while spinning)
+        polled = frames_to(server, probe.unit) + 10
+        assert client.spin_until(lambda: frames_to(server, probe.unit) > polled, 20.0)
+        assert client.set_parameter(f'{rig.name}.allow_control', True).successful
+        back_at = len(probe.words())
+        assert client.spin_until(lambda: frames_to(server, probe.unit) > back_at + 40, 20.0)
+        flags = [is_run_word(word) for word in probe.words()[back_at:]]
+        print(f'{len(flags)} control words after control came back, {sum(flags)} run; '
+              f'starts: {probe.start_edges()}')
+        assert not any(flags) and probe.start_edges() == 0, \
+            'a command that was there before control came back started the drive'
+        assert not probe.moving()
+        velocity[0] = 0.0  # zero and back: a new request, it starts
+        client.spin_until(lambda: False, 0.3)
+        velocity[0] = 5.0
+        assert client.spin_until(probe.moving, 15.0)
+        client.node.destroy_timer(timer)
+        assert probe.start_edges() == 1
+
+
 def test_auto_start_whose_reply_was_lost_is_not_repeated_by_the_stream(tmp_path):
     """
     auto_start: the start a nonzero joint command sends loses its reply; the stream goes on.

@@ -173,6 +173,39 @@ def test_a_trip_or_a_stop_from_elsewhere_blocks_until_zero_and_back():
         assert auto.command(True, 0.5, STOPPED) is Command.START
 
 
+MONITOR_ONLY = joints.DriveFacts(holds_run=False, online=True, tripped=False,
+                                 allow_control=False)
+
+
+def test_a_command_already_there_when_control_returns_starts_nothing():
+    # Found by an adversarial probe through the node: armed by a zero, then allow_control
+    # false at runtime, the controller's nonzero command refused meanwhile; when control came
+    # back the next nonzero command started the motor (19 ms after). Seen monitor-only (a
+    # reading) or a refused command: automatic starts wait for zero and back.
+    for seen in ('reading', 'refused'):
+        auto = joints.AutoStart(delay_s=0.5)
+        assert auto.command(False, 0.0, STOPPED) is None  # armed
+        if seen == 'reading':
+            assert auto.reading(0.1, MONITOR_ONLY) is None
+        else:
+            auto.refused('motor is monitor only (allow_control is false)')
+        assert auto.blocked and auto.log
+        assert auto.command(True, 0.2, STOPPED) is None  # control is back: still nothing
+        assert auto.command(True, 5.0, STOPPED) is None
+        assert auto.command(False, 5.1, STOPPED) is None
+        assert auto.command(True, 5.2, STOPPED) is Command.START
+
+
+def test_a_zero_while_monitor_only_does_not_arm_a_start_before_control_returns():
+    auto = joints.AutoStart(delay_s=0.5)
+    assert auto.command(False, 0.0, MONITOR_ONLY) is None
+    assert auto.command(True, 0.1, MONITOR_ONLY) is None  # refused by the facts, blocked
+    assert auto.blocked
+    assert auto.command(True, 0.2, STOPPED) is None  # the nonzero was there before
+    assert auto.command(False, 0.3, STOPPED) is None
+    assert auto.command(True, 0.4, STOPPED) is Command.START
+
+
 def test_a_failed_automatic_stop_is_sent_again_only_with_the_next_decision():
     auto = joints.AutoStart(delay_s=0.0)
     auto.holding = True

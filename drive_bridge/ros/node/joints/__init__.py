@@ -26,8 +26,9 @@ most once a second per kind.
 command starts a stopped, untripped drive; a zero command held ``auto_stop_delay`` seconds
 ramp-stops it. Never two automatic starts (or stops) in flight for one drive; a failed
 automatic start, a trip, a stop the node did not make itself (a stop service, the deadman,
-deactivate) or a switch to auto_start keeps automatic starts off until the command goes to
-zero (and back). A trip is never reset automatically.
+deactivate), a switch to auto_start, the drive seen monitor-only or a refused joint command
+keeps automatic starts off until the command goes to zero (and back). A trip is never reset
+automatically.
 
 The parts (one module each), composed by :class:`JointBridge` around one
 :class:`~drive_bridge.ros.node.joints.model.JointTable`: ``states`` (bus thread), ``commands``

@@ -4,8 +4,10 @@
 A nonzero command starts a stopped, untripped drive; a zero command held
 ``auto_stop_delay`` seconds ramp-stops it. Never two automatic starts (or stops) in flight
 for one drive; a failed automatic start, a trip, a stop the node did not make itself (a stop
-service, the deadman, deactivate) or a switch to auto_start keeps automatic starts off until
-the command goes to zero (and back). A trip is never reset automatically.
+service, the deadman, deactivate), a switch to auto_start, the drive seen monitor-only
+(``allow_control`` false) or a joint command refused keeps automatic starts off until the
+command goes to zero (and back): so a command that was already there when control came back
+starts nothing. A trip is never reset automatically.
 :class:`drive_bridge.ros.node.joints.starter.AutoStarter` carries the decisions out.
 """
 
@@ -79,6 +81,10 @@ class AutoStart:
         self._observe(drive)
         return self._stop_if_due(now_s, drive)
 
+    def refused(self, reason: str) -> None:
+        """Block automatic starts after a joint command the bridge did not take."""
+        self._block(f'a joint command was refused ({reason})')
+
     def start_done(self, error: Optional[BaseException]) -> None:
         """Take the outcome of an automatic start (None: acknowledged)."""
         self.starting = False
@@ -103,6 +109,8 @@ class AutoStart:
     def _observe(self, drive: DriveFacts) -> None:
         if drive.tripped:
             self._block('the drive tripped')
+        elif not drive.allow_control:
+            self._block('the drive is monitor only (allow_control false)')
         elif self.holding and not drive.holds_run and not self.expect_stop:
             self._block('stopped by something else than an automatic stop (a stop service, '
                         'the deadman, deactivate)')

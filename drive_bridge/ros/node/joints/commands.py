@@ -151,6 +151,8 @@ class JointCommands:
         except CommandRefused as error:
             self._warn(f'refused {spec.name}', f'{COMMANDS_TOPIC}: {spec.name} '
                        f'({spec.device}) velocity {velocity!r} rad/s: {error}')
+            if spec.command_mode == 'auto_start':
+                self._starter.on_refused(joint, error)
             return
         if spec.command_mode == 'auto_start':
             self._starter.on_command(joint, word != 0)

@@ -37,6 +37,13 @@ class AutoStarter:
             notes, joint.auto.log = joint.auto.log, []
         self._carry_out(joint, decision, notes)
 
+    def on_refused(self, joint: Joint, error: CommandRefused) -> None:
+        """Take a joint command the bus refused (commands thread): no automatic start from it."""
+        with self._table.lock:
+            joint.auto.refused(str(error))
+            notes, joint.auto.log = joint.auto.log, []
+        self._carry_out(joint, None, notes)
+
     def on_reading(self, joint: Joint) -> None:
         """Take a fresh reading of the drive (bus thread): a zero held long enough stops it."""
         facts = DriveFacts.of(self._bus.snapshot(joint.spec.device))
