@@ -691,8 +691,8 @@ def test_auto_start_stream_does_not_start_a_drive_when_control_returns(tmp_path)
         polled = frames_to(server, probe.unit) + 10
         assert client.spin_until(lambda: frames_to(server, probe.unit) > polled, 20.0)
         assert client.set_parameter(f'{rig.name}.allow_control', True).successful
-        back_at = len(probe.words())
-        assert client.spin_until(lambda: frames_to(server, probe.unit) > back_at + 40, 20.0)
+        back_at, frames_at = len(probe.words()), frames_to(server, probe.unit)
+        assert client.spin_until(lambda: frames_to(server, probe.unit) > frames_at + 40, 20.0)
         flags = [is_run_word(word) for word in probe.words()[back_at:]]
         print(f'{len(flags)} control words after control came back, {sum(flags)} run; '
               f'starts: {probe.start_edges()}')

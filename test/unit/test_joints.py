@@ -206,6 +206,19 @@ def test_a_zero_while_monitor_only_does_not_arm_a_start_before_control_returns()
     assert auto.command(True, 0.4, STOPPED) is Command.START
 
 
+def test_zeros_while_tripped_do_not_arm_and_log_once():
+    # A zero used to arm automatic starts again and the next observation of the trip to
+    # block them: two warnings a message at the stream's rate until the trip was reset.
+    tripped = joints.DriveFacts(holds_run=False, online=True, tripped=True, allow_control=True)
+    auto = joints.AutoStart(delay_s=0.5)
+    for index in range(100):
+        assert auto.command(False, index * 0.01, tripped) is None
+    assert auto.blocked and len(auto.log) == 1, auto.log
+    assert auto.command(True, 1.1, STOPPED) is None  # reset: the nonzero was not a new one
+    assert auto.command(False, 1.2, STOPPED) is None
+    assert auto.command(True, 1.3, STOPPED) is Command.START
+
+
 def test_a_failed_automatic_stop_is_sent_again_only_with_the_next_decision():
     auto = joints.AutoStart(delay_s=0.0)
     auto.holding = True
@@ -514,6 +527,23 @@ def test_auto_start_on_a_bus():
     logged = [text for _, text in bench.logger.lines]
     assert any('automatic start (nonzero joint command)' in text for text in logged)
     assert any('automatic ramp stop (zero joint command held 0.5 s)' in text for text in logged)
+
+
+def test_an_auto_start_command_that_came_while_inactive_starts_nothing_once_active():
+    bench = Bench(command_mode='auto_start', auto_stop_delay=0.5)
+    bench.run(0.3)
+    bench.active = False
+    bench.command(left_wheel=5.0)  # refused: the node is not active
+    bench.run(0.3)
+    bench.active = True
+    bench.command(left_wheel=5.0)  # already there before the activation
+    bench.run(0.3)
+    assert not bench.bus.snapshot('left').holds_run
+    assert not [w for unit, w in bench.line.writes if unit == 1 and w[0] == 0x047C]
+    bench.command(left_wheel=0.0)
+    bench.command(left_wheel=5.0)  # zero and back: a new request
+    bench.run(0.3)
+    assert bench.bus.snapshot('left').holds_run
 
 
 def test_runtime_command_mode_changes():

@@ -5,9 +5,10 @@ A nonzero command starts a stopped, untripped drive; a zero command held
 ``auto_stop_delay`` seconds ramp-stops it. Never two automatic starts (or stops) in flight
 for one drive; a failed automatic start, a trip, a stop the node did not make itself (a stop
 service, the deadman, deactivate), a switch to auto_start, the drive seen monitor-only
-(``allow_control`` false) or a joint command refused keeps automatic starts off until the
-command goes to zero (and back): so a command that was already there when control came back
-starts nothing. A trip is never reset automatically.
+(``allow_control`` false) or a joint command refused (one that came while the node was
+inactive too) keeps automatic starts off until the command goes to zero (and back), with
+the drive untripped and controllable: so a command that was already there when control came
+back, or when the node became active, starts nothing. A trip is never reset automatically.
 :class:`drive_bridge.ros.node.joints.starter.AutoStarter` carries the decisions out.
 """
 
@@ -62,9 +63,9 @@ class AutoStart:
         """Take one accepted command, zero or not, at ``now_s``."""
         self._observe(drive)
         if not nonzero:
-            if self.blocked:
+            if self.blocked and not drive.tripped and drive.allow_control:
                 self.log.append('zero command: automatic starts are armed again')
-            self.blocked = ''
+                self.blocked = ''  # (a tripped or monitor-only drive stays blocked)
             if self.zero_since_s is None:
                 self.zero_since_s = now_s
             return self._stop_if_due(now_s, drive)

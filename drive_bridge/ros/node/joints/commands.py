@@ -114,6 +114,7 @@ class JointCommands:
         if not self._is_active():
             self._warn('inactive', f'{COMMANDS_TOPIC}: node is not active (lifecycle): '
                        'activate it first; nothing sent')
+            self._refused_while_inactive(message.name)
             return
         if not len(message.velocity):
             self._ignored('without_velocity', f'{COMMANDS_TOPIC}: a message without '
@@ -134,6 +135,13 @@ class JointCommands:
                               f'(joints: {", ".join(self._by_name)}): ignored')
                 continue
             self._command(joint, velocity)
+
+    def _refused_while_inactive(self, names) -> None:
+        """Block the automatic starts of the joints named: their command came while inactive."""
+        for name in names:
+            joint = self._by_name.get(name)
+            if joint is not None and joint.spec.command_mode == 'auto_start':
+                self._starter.on_refused(joint, CommandRefused('the node was not active'))
 
     def _ignored(self, counter: str, text: str, kind: str = '') -> None:
         """Count an ignored message and log why (throttled per ``kind``, else ``counter``)."""
