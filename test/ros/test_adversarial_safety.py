@@ -634,6 +634,29 @@ def test_starter_stopped_locally_during_an_outage_is_not_restarted(rigs):
         assert not probe.moving()
 
 
+def mark(server, probe) -> Tuple[int, int]:
+    """Return the control words the drive got so far and the requests it got (a mark)."""
+    return len(probe.words()), frames_to(server, probe.unit)
+
+
+def run_flags_since(client, server, probe, since: Tuple[int, int],
+                    requests: int = 40) -> List[bool]:
+    """Spin until ``requests`` more reached the drive since ``since``; return run flags."""
+    words_at, frames_at = since
+    assert client.spin_until(lambda: frames_to(server, probe.unit) > frames_at + requests,
+                             20.0)
+    return [is_run_word(word) for word in probe.words()[words_at:]]
+
+
+def zero_and_back_starts(client, probe, velocity: List[float], timer) -> None:
+    """Send zero, then 5 rad/s again (a new request): wait until the drive turns."""
+    velocity[0] = 0.0
+    client.spin_until(lambda: False, 0.3)
+    velocity[0] = 5.0
+    assert client.spin_until(probe.moving, 15.0)
+    client.node.destroy_timer(timer)
+
+
 def test_auto_start_stream_does_not_restart_a_drive_after_an_outage(tmp_path):
     """
     auto_start joint commands keep asking 5 rad/s through an outage: no restart after it.
@@ -655,20 +678,15 @@ def test_auto_start_stream_does_not_restart_a_drive_after_an_outage(tmp_path):
         assert client.wait_state(rig.name, 'offline', 10.0)
         with server.lock:
             server.silent_units.discard(probe.unit)
-            back_at = len(probe.words())
+            back = mark(server, probe)
         assert client.spin_until(lambda: client.state(rig.name) not in ('offline', ''), 15.0)
-        assert client.spin_until(lambda: frames_to(server, probe.unit) > back_at + 40, 20.0)
-        flags = [is_run_word(word) for word in probe.words()[back_at:]]
+        flags = run_flags_since(client, server, probe, back)
         print(f'{len(flags)} control words after the outage, {sum(flags)} run; starts: '
               f'{probe.start_edges()}')
         assert not any(flags), 'the stream restarted the drive after the outage'
         assert probe.start_edges() == 1
         assert client.spin_until(probe.stopped, 10.0)
-        velocity[0] = 0.0  # zero and back: a new request, it starts
-        client.spin_until(lambda: False, 0.3)
-        velocity[0] = 5.0
-        assert client.spin_until(probe.moving, 15.0)
-        client.node.destroy_timer(timer)
+        zero_and_back_starts(client, probe, velocity, timer)
         assert probe.start_edges() == 2
 
 
@@ -691,19 +709,13 @@ def test_auto_start_stream_does_not_start_a_drive_when_control_returns(tmp_path)
         polled = frames_to(server, probe.unit) + 10
         assert client.spin_until(lambda: frames_to(server, probe.unit) > polled, 20.0)
         assert client.set_parameter(f'{rig.name}.allow_control', True).successful
-        back_at, frames_at = len(probe.words()), frames_to(server, probe.unit)
-        assert client.spin_until(lambda: frames_to(server, probe.unit) > frames_at + 40, 20.0)
-        flags = [is_run_word(word) for word in probe.words()[back_at:]]
+        flags = run_flags_since(client, server, probe, mark(server, probe))
         print(f'{len(flags)} control words after control came back, {sum(flags)} run; '
               f'starts: {probe.start_edges()}')
         assert not any(flags) and probe.start_edges() == 0, \
             'a command that was there before control came back started the drive'
         assert not probe.moving()
-        velocity[0] = 0.0  # zero and back: a new request, it starts
-        client.spin_until(lambda: False, 0.3)
-        velocity[0] = 5.0
-        assert client.spin_until(probe.moving, 15.0)
-        client.node.destroy_timer(timer)
+        zero_and_back_starts(client, probe, velocity, timer)
         assert probe.start_edges() == 1
 
 
