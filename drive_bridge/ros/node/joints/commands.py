@@ -141,7 +141,7 @@ class JointCommands:
         for name in names:
             joint = self._by_name.get(name)
             if joint is not None and joint.spec.command_mode == 'auto_start':
-                self._starter.on_refused(joint, CommandRefused('the node was not active'))
+                self._starter.on_refused(joint, 'the node was not active')
 
     def _ignored(self, counter: str, text: str, kind: str = '') -> None:
         """Count an ignored message and log why (throttled per ``kind``, else ``counter``)."""
@@ -160,7 +160,7 @@ class JointCommands:
             self._warn(f'refused {spec.name}', f'{COMMANDS_TOPIC}: {spec.name} '
                        f'({spec.device}) velocity {velocity!r} rad/s: {error}')
             if spec.command_mode == 'auto_start':
-                self._starter.on_refused(joint, error)
+                self._starter.on_refused(joint, str(error))
             return
         if spec.command_mode == 'auto_start':
             self._starter.on_command(joint, word != 0)

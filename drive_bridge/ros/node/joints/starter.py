@@ -37,10 +37,10 @@ class AutoStarter:
             notes, joint.auto.log = joint.auto.log, []
         self._carry_out(joint, decision, notes)
 
-    def on_refused(self, joint: Joint, error: CommandRefused) -> None:
-        """Take a joint command the bus refused (commands thread): no automatic start from it."""
+    def on_refused(self, joint: Joint, reason: str) -> None:
+        """Take a joint command not taken (commands thread): no automatic start from it."""
         with self._table.lock:
-            joint.auto.refused(str(error))
+            joint.auto.refused(reason)
             notes, joint.auto.log = joint.auto.log, []
         self._carry_out(joint, None, notes)
 
